@@ -1,0 +1,3 @@
+from dynpush.cli import main
+
+raise SystemExit(main())

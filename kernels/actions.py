@@ -1,0 +1,40 @@
+"""Action processing (paper III-C): deviations about the default base state and arm configuration."""
+
+import warp as wp
+
+from .views import NUM_ACTIONS, NUM_ARM_JOINTS, NUM_BASE_COMMANDS, PushTask, RobotView
+
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.kernel
+def process_actions(
+    raw_actions: wp.array2d(dtype=float),
+    robot: RobotView,
+    task: PushTask,
+    base_default: wp.array(dtype=float),
+    base_scale: wp.array(dtype=float),
+    arm_scale: float,
+    clip: float,
+    joint_target_q: wp.array(dtype=float),
+):
+    """Shifts the action history and turns the policy output into absolute commands.
+
+    ``u_base^cmd = base_default + base_scale * a[0:6]`` (vx, vy [m/s] and yaw rate [rad/s] in the
+    heading frame; roll, pitch [rad]; height [m]); ``q_j^cmd = q_default + arm_scale * a[6:11]``
+    [rad] goes to the arm's joint position drives. Non-finite actions count as zero.
+    """
+    w = wp.tid()
+    for i in range(NUM_ACTIONS):
+        a = raw_actions[w, i]
+        if not wp.isfinite(a):
+            a = 0.0
+        task.last_actions[w, i] = task.actions[w, i]
+        task.actions[w, i] = wp.clamp(a, -clip, clip)
+    for i in range(NUM_BASE_COMMANDS):
+        task.base_command[w, i] = base_default[i] + base_scale[i] * task.actions[w, i]
+    start = robot.arm_q_start[w]
+    for j in range(NUM_ARM_JOINTS):
+        q_cmd = task.arm_default[j] + arm_scale * task.actions[w, NUM_BASE_COMMANDS + j]
+        task.arm_command[w, j] = q_cmd
+        joint_target_q[start + j] = q_cmd

@@ -1,0 +1,36 @@
+"""Frame helpers shared by the kernels (``wp.func`` only, no launches).
+
+Conventions (DESIGN.md): world Z-up, SI units, quaternions stored (x, y, z, w) as in Warp/Newton,
+rotation matrices act on column vectors (``p_world = R_wb @ p_b``).
+"""
+
+import warp as wp
+
+
+@wp.func
+def yaw_quat(yaw: float):
+    """Rotation about world +z by ``yaw`` [rad], as a (x, y, z, w) quaternion."""
+    return wp.quat_from_axis_angle(wp.vec3(0.0, 0.0, 1.0), yaw)
+
+
+@wp.func
+def tilt_angle(q: wp.quat):
+    """Angle [rad] between the body's +z axis and the world +z axis."""
+    z_axis = wp.quat_rotate(q, wp.vec3(0.0, 0.0, 1.0))
+    return wp.acos(wp.clamp(z_axis[2], -1.0, 1.0))
+
+
+@wp.func
+def rotation_angle(q_a: wp.quat, q_b: wp.quat):
+    """Angle [rad] of the relative rotation between two orientations, in [0, pi]."""
+    d = wp.abs(wp.dot(q_a, q_b))
+    return 2.0 * wp.acos(wp.clamp(d, 0.0, 1.0))
+
+
+@wp.func
+def next_rng(seed: int, rng_counter: wp.array(dtype=int), w: int):
+    """A fresh random stream for world ``w``: counter-based, so runs are reproducible per seed."""
+    n = rng_counter.shape[0]
+    state = wp.rand_init(seed, w + n * rng_counter[w])
+    rng_counter[w] = rng_counter[w] + 1
+    return state

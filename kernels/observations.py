@@ -1,0 +1,138 @@
+"""Observations (paper Table "Observations").
+
+Actor ``o_t`` (54, with additive uniform noise), in this order:
+``ee_to_object_b`` (3, ^b p_oe = R_b^T (p_e - p_o)), ``object_rotation_b`` (9, ^b R_o row-major),
+``arm_joint_position`` (5, q_j - q_default), ``base_linear_velocity_b`` (3), ``base_angular_velocity_b``
+(3), ``arm_joint_velocity`` (5), ``projected_gravity_b`` (3, R_b^T (0, 0, -1)), ``object_to_goal_b``
+(3, ^b p_og = R_b^T (p_g - p_o)), ``goal_rotation_o`` (9, ^o R_g row-major), ``last_actions`` (11).
+
+Critic (73, noiseless): the 54 above without noise, then ``ee_object_contact`` (1),
+``object_com_b`` (3, R_b^T (c_o - p_b)), ``object_mass`` (1), ``object_dims`` (3),
+``object_inertia`` (3, principal), ``object_linear_velocity_b`` (3), ``object_angular_velocity_b``
+(3), ``object_shape_one_hot`` (2: cuboid, cylinder). Velocities of the object are those of its frame
+origin (the centroid), expressed in the base frame.
+"""
+
+import warp as wp
+
+from .frames import next_rng
+from .views import EE_CONTACT, NUM_ACTIONS, NUM_ARM_JOINTS, NUM_POLICY_OBS, PushTask, RobotView
+
+wp.set_module_options({"enable_backward": False})
+
+# (name, size) of each actor term, in order; the noise half-widths follow the same order.
+POLICY_TERMS = (
+    ("ee_to_object_b", 3),
+    ("object_rotation_b", 9),
+    ("arm_joint_position", 5),
+    ("base_linear_velocity_b", 3),
+    ("base_angular_velocity_b", 3),
+    ("arm_joint_velocity", 5),
+    ("projected_gravity_b", 3),
+    ("object_to_goal_b", 3),
+    ("goal_rotation_o", 9),
+    ("last_actions", 11),
+)
+PRIVILEGED_TERMS = (
+    ("ee_object_contact", 1),
+    ("object_com_b", 3),
+    ("object_mass", 1),
+    ("object_dims", 3),
+    ("object_inertia", 3),
+    ("object_linear_velocity_b", 3),
+    ("object_angular_velocity_b", 3),
+    ("object_shape_one_hot", 2),
+)
+
+
+@wp.func
+def object_origin_velocity(x_o: wp.transform, qd_o: wp.spatial_vector, com_o: wp.vec3):
+    """World-frame velocity [m/s] of the object frame origin from Newton's CoM twist."""
+    p_o = wp.transform_get_translation(x_o)
+    c_w = wp.transform_point(x_o, com_o)
+    return wp.spatial_top(qd_o) + wp.cross(wp.spatial_bottom(qd_o), p_o - c_w)
+
+
+@wp.func
+def write_vec(out: wp.array2d(dtype=float), w: int, k: int, v: wp.vec3):
+    out[w, k + 0] = v[0]
+    out[w, k + 1] = v[1]
+    out[w, k + 2] = v[2]
+    return k + 3
+
+
+@wp.func
+def write_mat(out: wp.array2d(dtype=float), w: int, k: int, m: wp.mat33):
+    for r in range(3):
+        for c in range(3):
+            out[w, k + 3 * r + c] = m[r, c]
+    return k + 9
+
+
+@wp.kernel
+def compute_observations(
+    robot: RobotView,
+    task: PushTask,
+    noise_scale: wp.array(dtype=float),
+    noise_enabled: int,
+    seed: int,
+    policy_obs: wp.array2d(dtype=float),
+    critic_obs: wp.array2d(dtype=float),
+):
+    """Fills ``critic_obs`` (noiseless) then ``policy_obs`` = its first 54 entries + U(-s, s) noise.
+
+    ``noise_scale`` holds one half-width per actor entry (54, zero for ``last_actions``).
+    """
+    w = wp.tid()
+    x_b = robot.body_q[robot.base_body[w]]
+    x_o = robot.body_q[robot.object_body[w]]
+    x_e = robot.body_q[robot.ee_body[w]]
+    q_b = wp.transform_get_rotation(x_b)
+    q_o = wp.transform_get_rotation(x_o)
+    p_b = wp.transform_get_translation(x_b)
+    p_o = wp.transform_get_translation(x_o)
+    p_e = wp.transform_point(x_e, robot.ee_offset)
+    R_b = wp.quat_to_matrix(q_b)
+    R_o = wp.quat_to_matrix(q_o)
+    R_g = wp.quat_to_matrix(task.goal_quat[w])
+    qd_b = robot.body_qd[robot.base_body[w]]
+
+    k = int(0)
+    k = write_vec(critic_obs, w, k, wp.transpose(R_b) @ (p_e - p_o))
+    k = write_mat(critic_obs, w, k, wp.transpose(R_b) @ R_o)
+    for j in range(NUM_ARM_JOINTS):
+        critic_obs[w, k + j] = robot.joint_q[robot.arm_q_start[w] + j] - task.arm_default[j]
+    k += NUM_ARM_JOINTS
+    k = write_vec(critic_obs, w, k, wp.quat_rotate_inv(q_b, wp.spatial_top(qd_b)))
+    k = write_vec(critic_obs, w, k, wp.quat_rotate_inv(q_b, wp.spatial_bottom(qd_b)))
+    for j in range(NUM_ARM_JOINTS):
+        critic_obs[w, k + j] = robot.joint_qd[robot.arm_qd_start[w] + j]
+    k += NUM_ARM_JOINTS
+    k = write_vec(critic_obs, w, k, wp.quat_rotate_inv(q_b, wp.vec3(0.0, 0.0, -1.0)))
+    k = write_vec(critic_obs, w, k, wp.transpose(R_b) @ (task.goal_pos[w] - p_o))
+    k = write_mat(critic_obs, w, k, wp.transpose(R_o) @ R_g)
+    for i in range(NUM_ACTIONS):
+        critic_obs[w, k + i] = task.actions[w, i]
+    k += NUM_ACTIONS
+
+    # Privileged terms.
+    critic_obs[w, k] = float(task.contacts[w, EE_CONTACT])
+    k += 1
+    k = write_vec(critic_obs, w, k, wp.quat_rotate_inv(q_b, wp.transform_point(x_o, task.object_com_o[w]) - p_b))
+    critic_obs[w, k] = task.object_mass[w]
+    k += 1
+    k = write_vec(critic_obs, w, k, task.object_dims[w])
+    k = write_vec(critic_obs, w, k, task.object_inertia[w])
+    qd_o = robot.body_qd[robot.object_body[w]]
+    k = write_vec(critic_obs, w, k, wp.quat_rotate_inv(q_b, object_origin_velocity(x_o, qd_o, task.object_com_o[w])))
+    k = write_vec(critic_obs, w, k, wp.quat_rotate_inv(q_b, wp.spatial_bottom(qd_o)))
+    shape = task.object_shape[w]
+    critic_obs[w, k] = wp.where(shape == 0, 1.0, 0.0)
+    critic_obs[w, k + 1] = wp.where(shape == 1, 1.0, 0.0)
+
+    rng = next_rng(seed, task.rng_counter, w)
+    for i in range(NUM_POLICY_OBS):
+        noise = float(0.0)
+        if noise_enabled != 0:
+            noise = wp.randf(rng, -1.0, 1.0) * noise_scale[i]
+        policy_obs[w, i] = critic_obs[w, i] + noise

@@ -1,0 +1,274 @@
+"""Reset sampling and domain randomisation (paper III-B, III-E), plus random base pushes.
+
+Every world flagged in ``reset`` draws a new episode: object shape, dimensions, mass, CoM and
+friction; object at the origin with a random yaw; goal uniform in the disc r <= goal_radius with a
+random yaw; robot base uniform (by area) in the annulus with a random yaw at nominal height; arm
+joints uniform around the default; reach target uniform on the object's vertical surfaces.
+"""
+
+import warp as wp
+
+from .frames import next_rng, yaw_quat
+from .views import NUM_ACTIONS, NUM_ARM_JOINTS, NUM_BASE_COMMANDS, CONTACT_COLUMNS, PushTask, RobotView
+
+wp.set_module_options({"enable_backward": False})
+
+SHAPE_CUBOID = 0
+SHAPE_CYLINDER = 1
+
+
+@wp.struct
+class SamplingParams:
+    robot_radius: wp.vec2  # [m]
+    goal_radius: float  # [m]
+    yaw_range: wp.vec2  # [rad]
+    surface_target: int  # 0: reach target at the centroid (ablation)
+    friction: wp.vec2  # combined object-floor coefficient
+    ground_friction: float  # the floor's own coefficient (Newton averages the two)
+    mass: wp.vec2  # [kg]
+    com_fraction_lo: wp.vec3
+    com_fraction_hi: wp.vec3
+    size_lo: wp.vec3  # [m]
+    size_hi: wp.vec3  # [m]
+    cylinder_probability: float
+    base_mass_offset: wp.vec2  # [kg]
+    push_interval_steps: wp.vec2  # control steps
+    push_velocity: float  # [m/s]
+    arm_joint_noise: float  # [rad]
+    base_height: float  # [m]
+    frozen_joint_value: float  # [rad] of the 6th arm joint
+
+
+@wp.func
+def uniform(rng: wp.uint32, r: wp.vec2):
+    return wp.randf(rng, r[0], r[1])
+
+
+@wp.func
+def cuboid_inertia(m: float, d: wp.vec3):
+    return wp.vec3(
+        m / 12.0 * (d[1] * d[1] + d[2] * d[2]),
+        m / 12.0 * (d[0] * d[0] + d[2] * d[2]),
+        m / 12.0 * (d[0] * d[0] + d[1] * d[1]),
+    )
+
+
+@wp.func
+def cylinder_inertia(m: float, d: wp.vec3):
+    r = 0.5 * d[0]
+    side = m / 12.0 * (3.0 * r * r + d[2] * d[2])
+    return wp.vec3(side, side, 0.5 * m * r * r)
+
+
+@wp.func
+def surface_point(rng: wp.uint32, shape: int, d: wp.vec3):
+    """A point uniform (by area) on the vertical surfaces of the object, object frame [m]."""
+    z = wp.randf(rng, -0.5 * d[2], 0.5 * d[2])
+    if shape == SHAPE_CYLINDER:
+        angle = wp.randf(rng, -wp.pi, wp.pi)
+        return wp.vec3(0.5 * d[0] * wp.cos(angle), 0.5 * d[0] * wp.sin(angle), z)
+    # Pick a face with probability proportional to its area (perimeter share), then a point on it.
+    s = wp.randf(rng, 0.0, 2.0 * (d[0] + d[1]))
+    if s < d[1]:
+        return wp.vec3(0.5 * d[0], s - 0.5 * d[1], z)
+    s -= d[1]
+    if s < d[1]:
+        return wp.vec3(-0.5 * d[0], s - 0.5 * d[1], z)
+    s -= d[1]
+    if s < d[0]:
+        return wp.vec3(s - 0.5 * d[0], 0.5 * d[1], z)
+    s -= d[0]
+    return wp.vec3(s - 0.5 * d[0], -0.5 * d[1], z)
+
+
+@wp.kernel
+def sample_episodes(
+    reset: wp.array(dtype=int),
+    seed: int,
+    params: SamplingParams,
+    robot: RobotView,
+    task: PushTask,
+    base_default: wp.array(dtype=float),
+    base_mass_nominal: float,
+    robot_q_start: wp.array(dtype=int),
+    object_q_start: wp.array(dtype=int),
+    joint_q: wp.array(dtype=float),
+    joint_qd: wp.array(dtype=float),
+    body_mass: wp.array(dtype=float),
+    body_inv_mass: wp.array(dtype=float),
+    variant: wp.array(dtype=int),
+):
+    """Draws a new episode for every world with ``reset[w] != 0``; ``variant[w]`` = -1 elsewhere.
+
+    Writes the generalized coordinates of the robot (free base + 6 arm joints) and the object
+    (free joint) into ``joint_q``/``joint_qd``; the environment then runs forward kinematics.
+    """
+    w = wp.tid()
+    variant[w] = -1
+    if reset[w] == 0:
+        return
+    rng = next_rng(seed, task.rng_counter, w)
+
+    # Object.
+    shape = wp.where(wp.randf(rng) < params.cylinder_probability, SHAPE_CYLINDER, SHAPE_CUBOID)
+    d = wp.vec3(
+        wp.randf(rng, params.size_lo[0], params.size_hi[0]),
+        wp.randf(rng, params.size_lo[1], params.size_hi[1]),
+        wp.randf(rng, params.size_lo[2], params.size_hi[2]),
+    )
+    if shape == SHAPE_CYLINDER:
+        d = wp.vec3(d[0], d[0], d[2])
+    m = uniform(rng, params.mass)
+    com = wp.vec3(
+        wp.randf(rng, params.com_fraction_lo[0], params.com_fraction_hi[0]) * d[0],
+        wp.randf(rng, params.com_fraction_lo[1], params.com_fraction_hi[1]) * d[1],
+        wp.randf(rng, params.com_fraction_lo[2], params.com_fraction_hi[2]) * d[2],
+    )
+    task.object_shape[w] = shape
+    task.object_dims[w] = d
+    task.object_mass[w] = m
+    task.object_com_o[w] = com
+    task.object_inertia[w] = wp.where(shape == SHAPE_CYLINDER, cylinder_inertia(m, d), cuboid_inertia(m, d))
+    task.object_friction[w] = 2.0 * uniform(rng, params.friction) - params.ground_friction
+    variant[w] = shape
+
+    q_object = yaw_quat(uniform(rng, params.yaw_range))
+    o = object_q_start[w]
+    joint_q[o + 0] = 0.0
+    joint_q[o + 1] = 0.0
+    joint_q[o + 2] = 0.5 * d[2]
+    joint_q[o + 3] = q_object[0]
+    joint_q[o + 4] = q_object[1]
+    joint_q[o + 5] = q_object[2]
+    joint_q[o + 6] = q_object[3]
+
+    task.reach_target_o[w] = wp.vec3(0.0)
+    if params.surface_target != 0:
+        task.reach_target_o[w] = surface_point(rng, shape, d)
+
+    # Goal: uniform by area in the disc.
+    r_goal = params.goal_radius * wp.sqrt(wp.randf(rng))
+    a_goal = wp.randf(rng, -wp.pi, wp.pi)
+    task.goal_pos[w] = wp.vec3(r_goal * wp.cos(a_goal), r_goal * wp.sin(a_goal), 0.5 * d[2])
+    task.goal_quat[w] = yaw_quat(uniform(rng, params.yaw_range))
+
+    # Robot: uniform by area in the annulus.
+    r_lo = params.robot_radius[0]
+    r_hi = params.robot_radius[1]
+    r_robot = wp.sqrt(wp.randf(rng, r_lo * r_lo, r_hi * r_hi))
+    a_robot = wp.randf(rng, -wp.pi, wp.pi)
+    q_base = yaw_quat(uniform(rng, params.yaw_range))
+    b = robot_q_start[w]
+    joint_q[b + 0] = r_robot * wp.cos(a_robot)
+    joint_q[b + 1] = r_robot * wp.sin(a_robot)
+    joint_q[b + 2] = params.base_height
+    joint_q[b + 3] = q_base[0]
+    joint_q[b + 4] = q_base[1]
+    joint_q[b + 5] = q_base[2]
+    joint_q[b + 6] = q_base[3]
+    a0 = robot.arm_q_start[w]
+    for j in range(NUM_ARM_JOINTS):
+        joint_q[a0 + j] = task.arm_default[j] + wp.randf(rng, -params.arm_joint_noise, params.arm_joint_noise)
+    joint_q[a0 + NUM_ARM_JOINTS] = params.frozen_joint_value
+    base_mass = base_mass_nominal + uniform(rng, params.base_mass_offset)
+    body_mass[robot.base_body[w]] = base_mass
+    body_inv_mass[robot.base_body[w]] = 1.0 / base_mass
+
+    # Task buffers.
+    for i in range(NUM_ACTIONS):
+        task.actions[w, i] = 0.0
+        task.last_actions[w, i] = 0.0
+    for i in range(NUM_BASE_COMMANDS):
+        task.base_command[w, i] = base_default[i]
+        task.base_command_filtered[w, i] = base_default[i]
+    for j in range(NUM_ARM_JOINTS):
+        task.arm_command[w, j] = joint_q[a0 + j]
+    for c in range(CONTACT_COLUMNS):
+        task.contacts[w, c] = 0
+    task.episode_step[w] = 0
+    task.reach_reward_held[w] = 0.0
+    task.next_push_step[w] = int(uniform(rng, params.push_interval_steps))
+
+
+@wp.kernel
+def zero_velocities(reset: wp.array(dtype=int), robot_qd_start: wp.array(dtype=int), robot_qd_count: int,
+                    object_qd_start: wp.array(dtype=int), joint_qd: wp.array(dtype=float)):
+    """Zeroes the generalized velocities of the robot and the object of reset worlds."""
+    w = wp.tid()
+    if reset[w] == 0:
+        return
+    for i in range(robot_qd_count):
+        joint_qd[robot_qd_start[w] + i] = 0.0
+    for i in range(6):
+        joint_qd[object_qd_start[w] + i] = 0.0
+
+
+@wp.kernel
+def apply_object_properties(
+    reset: wp.array(dtype=int),
+    task: PushTask,
+    object_body: wp.array(dtype=int),
+    object_shape_index: wp.array(dtype=int),
+    shape_scale: wp.array(dtype=wp.vec3),
+    shape_collision_radius: wp.array(dtype=float),
+    shape_aabb_lower: wp.array(dtype=wp.vec3),
+    shape_aabb_upper: wp.array(dtype=wp.vec3),
+    shape_mu: wp.array(dtype=float),
+    body_mass: wp.array(dtype=float),
+    body_inv_mass: wp.array(dtype=float),
+    body_com: wp.array(dtype=wp.vec3),
+    body_inertia: wp.array(dtype=wp.mat33),
+    body_inv_inertia: wp.array(dtype=wp.mat33),
+):
+    """Writes the sampled geometry, friction and mass properties into the Newton model.
+
+    Runs after ``Model.select_body_variants``, which restores the prototype's properties. Shape
+    scale follows Newton's primitives: box half extents (hx, hy, hz); cylinder (radius, half height).
+    """
+    w = wp.tid()
+    if reset[w] == 0:
+        return
+    s = object_shape_index[w]
+    d = task.object_dims[w]
+    half = 0.5 * d
+    if task.object_shape[w] == SHAPE_CYLINDER:
+        shape_scale[s] = wp.vec3(half[0], half[2], 0.0)
+        shape_collision_radius[s] = wp.sqrt(half[0] * half[0] + half[2] * half[2])
+    else:
+        shape_scale[s] = half
+        shape_collision_radius[s] = wp.length(half)
+    shape_aabb_lower[s] = -half
+    shape_aabb_upper[s] = half
+    shape_mu[s] = task.object_friction[w]
+    b = object_body[w]
+    m = task.object_mass[w]
+    body_mass[b] = m
+    body_inv_mass[b] = 1.0 / m
+    body_com[b] = task.object_com_o[w]
+    inertia = task.object_inertia[w]
+    body_inertia[b] = wp.diag(inertia)
+    body_inv_inertia[b] = wp.diag(wp.vec3(1.0 / inertia[0], 1.0 / inertia[1], 1.0 / inertia[2]))
+
+
+@wp.kernel
+def apply_pushes(
+    seed: int,
+    params: SamplingParams,
+    robot: RobotView,
+    task: PushTask,
+    body_qd: wp.array(dtype=wp.spatial_vector),
+):
+    """Random base pushes every 7-10 s (paper III-E): a uniform horizontal velocity change."""
+    w = wp.tid()
+    if task.episode_step[w] < task.next_push_step[w]:
+        return
+    rng = next_rng(seed, task.rng_counter, w)
+    b = robot.base_body[w]
+    dv = wp.vec3(
+        wp.randf(rng, -params.push_velocity, params.push_velocity),
+        wp.randf(rng, -params.push_velocity, params.push_velocity),
+        0.0,
+    )
+    qd = body_qd[b]
+    body_qd[b] = wp.spatial_vector(wp.spatial_top(qd) + dv, wp.spatial_bottom(qd))
+    task.next_push_step[w] = task.episode_step[w] + int(uniform(rng, params.push_interval_steps))

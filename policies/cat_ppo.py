@@ -1,0 +1,171 @@
+"""Constraints as Terminations (CaT) as a small subclass of rsl_rl's PPO.
+
+Reference:
+    - Chane-Sane et al. "CaT: Constraints as Terminations for Legged Locomotion Learning." IROS 2024.
+
+The environment returns raw constraint values ``c`` of shape ``[num_envs, C]`` in ``extras["constraints"]`` (violated
+where ``c > 0``) and names their column groups in ``env.constraint_groups``. Every step, per column ``i``::
+
+    c_max_i <- tau * c_max_i + (1 - tau) * max(max_envs(c_i), 1e-6)     (seeded with the first batch)
+    p_i      = p_max_i * clip(c_i / c_max_i, 0, 1)   where c_i > 0, else 0
+    delta    = max_i p_i                                                 (per env, in [0, 1])
+
+``delta`` is a soft termination: the stored reward becomes ``r * (1 - delta)`` and GAE discounts with
+``gamma * (1 - delta_t)`` on top of the environment's dones. rsl_rl's storage keeps dones as bytes, so ``delta`` has
+its own float buffer (:attr:`CaTPPO.deltas`). Everything else (models, storage, update, normalisation) is rsl_rl's.
+"""
+
+from __future__ import annotations
+
+import torch
+from collections.abc import Callable, Sequence
+from tensordict import TensorDict
+
+from rsl_rl.algorithms import PPO
+from rsl_rl.env import VecEnv
+from rsl_rl.models import MLPModel
+from rsl_rl.storage import RolloutStorage
+
+
+class CaTPPO(PPO):
+    """PPO with Constraints as Terminations."""
+
+    def __init__(
+        self,
+        actor: MLPModel,
+        critic: MLPModel,
+        storage: RolloutStorage,
+        constraint_groups: Sequence[tuple[str, int]],
+        tau: float = 0.95,
+        c_max_floor: float = 1e-6,
+        **kwargs,
+    ) -> None:
+        """Initialize PPO and the CaT state.
+
+        Args:
+            actor: Actor model.
+            critic: Critic model.
+            storage: rsl_rl rollout storage.
+            constraint_groups: ``(name, dim)`` per constraint group, in column order of ``extras["constraints"]``.
+            tau: Polyak factor of the running maximum violation ``c_max`` (CaT paper: 0.95).
+            c_max_floor: Lower bound of the per-column batch maximum, keeps ``c / c_max`` finite (CaT paper: 1e-6).
+            **kwargs: Arguments of :class:`rsl_rl.algorithms.PPO`.
+        """
+        super().__init__(actor, critic, storage, **kwargs)
+        self.constraint_groups = [(str(name), int(dim)) for name, dim in constraint_groups]
+        self.tau = tau
+        self.c_max_floor = c_max_floor
+
+        num_constraints = sum(dim for _, dim in self.constraint_groups)
+        self.c_max = torch.zeros(num_constraints, device=self.device)
+        """Running maximum violation per column; 0 until the first batch seeds it. Saved in checkpoints."""
+
+        self.p_max: torch.Tensor | None = None
+        """Maximum termination probability per column, set by :meth:`set_p_max` (the runner's curriculum)."""
+
+        self.deltas = torch.zeros(storage.num_transitions_per_env, storage.num_envs, 1, device=self.device)
+        """Termination probability of every stored transition, aligned with ``storage.dones``."""
+
+        self.on_rollout_start: Callable[[], None] | None = None
+        """Called before the first action of every rollout (the runner applies its schedules here)."""
+
+    def set_p_max(self, p_max: torch.Tensor) -> None:
+        """Set the per-column maximum termination probability ``[C]``."""
+        if p_max.shape != self.c_max.shape:
+            raise ValueError(f"p_max has shape {tuple(p_max.shape)}, expected {tuple(self.c_max.shape)}.")
+        self.p_max = p_max.to(self.device, torch.float)
+
+    def reduce_batch_max(self, batch_max: torch.Tensor) -> torch.Tensor:
+        """Combine the per-column batch maxima of all processes.
+
+        Hook for multi-process training: all-reducing ``batch_max`` with ``ReduceOp.MAX`` here keeps ``c_max``
+        identical on every rank. In a single process the batch maximum is returned unchanged.
+        """
+        return batch_max
+
+    def termination_probability(self, constraints: torch.Tensor) -> torch.Tensor:
+        """Update ``c_max`` with a batch of raw constraints ``[num_envs, C]`` and return ``delta`` ``[num_envs]``."""
+        if self.p_max is None:
+            raise RuntimeError("p_max is not set: call set_p_max() (CaTOnPolicyRunner does at every iteration).")
+        batch_max = self.reduce_batch_max(constraints.amax(dim=0)).clamp(min=self.c_max_floor)
+        self.c_max.copy_(torch.where(self.c_max > 0, self.tau * self.c_max + (1.0 - self.tau) * batch_max, batch_max))
+        ratio = (constraints / self.c_max).clamp(0.0, 1.0)
+        probabilities = torch.where(constraints > 0, self.p_max * ratio, torch.zeros_like(ratio))
+        return probabilities.amax(dim=1)
+
+    def act(self, obs: TensorDict) -> torch.Tensor:
+        """Sample actions and store transition data; starts a rollout with :attr:`on_rollout_start`."""
+        if self.storage.step == 0 and self.on_rollout_start is not None:
+            self.on_rollout_start()
+        return super().act(obs)
+
+    def process_env_step(
+        self, obs: TensorDict, rewards: torch.Tensor, dones: torch.Tensor, extras: dict[str, torch.Tensor]
+    ) -> None:
+        """Record one environment step with its termination probability.
+
+        The stored reward, rsl_rl's time-out bootstrap ``gamma * V`` included, is scaled by ``1 - delta``: a
+        terminated transition has no continuation value either. CaT statistics of the step are added to the
+        extras dict that rsl_rl's logger averages over the iteration (``"episode"`` if present, else ``"log"``).
+        """
+        constraints = extras["constraints"].to(self.device, torch.float)
+        delta = self.termination_probability(constraints)
+        step = self.storage.step
+        self.deltas[step].copy_(delta.unsqueeze(1))
+        super().process_env_step(obs, rewards, dones, extras)
+        self.storage.rewards[step].mul_(1.0 - self.deltas[step])
+
+        log_key = "episode" if "episode" in extras else "log"
+        extras[log_key] = {**extras.get(log_key, {}), **self._step_log(constraints, delta)}
+
+    def compute_returns(self, obs: TensorDict) -> None:
+        """Compute GAE returns and advantages with the per-step discount ``gamma * (1 - delta_t)``."""
+        st = self.storage
+        # Compute values for the last step
+        critic_hidden_state = self.critic.get_hidden_state()
+        last_values = self.critic(obs).detach()
+        # Restore the critic's hidden state so the next rollout is not affected by the forward pass
+        self.critic.reset(hidden_state=critic_hidden_state)
+        advantage = 0
+        for step in reversed(range(st.num_transitions_per_env)):
+            next_values = last_values if step == st.num_transitions_per_env - 1 else st.values[step + 1]
+            # Probability that the episode continues after this step: real dones and CaT terminations
+            next_is_not_terminal = (1.0 - st.dones[step].float()) * (1.0 - self.deltas[step])
+            # TD error: r_t + gamma * (1 - delta_t) * V(s_{t+1}) - V(s_t)
+            delta = st.rewards[step] + next_is_not_terminal * self.gamma * next_values - st.values[step]
+            # Advantage: A_t = TD_t + gamma * (1 - delta_t) * lambda * A_{t+1}
+            advantage = delta + next_is_not_terminal * self.gamma * self.lam * advantage
+            st.returns[step] = advantage + st.values[step]
+        st.advantages = st.returns - st.values
+        if not self.normalize_advantage_per_mini_batch:
+            st.advantages = (st.advantages - st.advantages.mean()) / (st.advantages.std() + 1e-8)
+
+    def save(self) -> dict:
+        """Return PPO's saved dict plus the CaT state (``c_max``)."""
+        saved_dict = super().save()
+        saved_dict["cat_state_dict"] = {"c_max": self.c_max.clone()}
+        return saved_dict
+
+    def load(self, loaded_dict: dict, load_cfg: dict | None, strict: bool) -> bool:
+        """Load PPO's models and states, and ``c_max`` unless ``load_cfg`` is given without ``"cat": True``."""
+        load_iteration = super().load(loaded_dict, load_cfg, strict)
+        if load_cfg is None or load_cfg.get("cat"):
+            self.c_max.copy_(loaded_dict["cat_state_dict"]["c_max"])
+        return load_iteration
+
+    @staticmethod
+    def construct_algorithm(obs: TensorDict, env: VecEnv, cfg: dict, device: str) -> CaTPPO:
+        """Construct CaT-PPO as rsl_rl constructs PPO, with the constraint layout of ``env.constraint_groups``.
+
+        The layout is recorded in ``cfg["algorithm"]["constraint_groups"]``, next to the other algorithm arguments.
+        """
+        cfg["algorithm"]["constraint_groups"] = [(name, dim) for name, dim in env.constraint_groups]  # type: ignore
+        return PPO.construct_algorithm(obs, env, cfg, device)  # type: ignore
+
+    def _step_log(self, constraints: torch.Tensor, delta: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Mean ``delta`` and, per group, the fraction of envs with any column violated."""
+        violated = (constraints > 0).split([dim for _, dim in self.constraint_groups], dim=1)
+        log = {"CaT/mean_delta": delta.mean()}
+        for (name, _), group in zip(self.constraint_groups, violated):
+            log[f"CaT/violation_rate/{name}"] = group.any(dim=1).float().mean()
+        return log

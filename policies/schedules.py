@@ -1,0 +1,142 @@
+"""Training-iteration schedules of the push task: CaT ``p_max`` curricula and the reach-reward weight.
+
+The numbers are those of Dadiotis et al. (ICRA 2025), Table "Rewards and constraints" and Sec. "Rewards &
+constraints". The paper trains for 20000 iterations; a shorter run compresses every schedule by its length
+(``ScheduleConfig.scale_with_run_length``) so that, e.g., a 2000-iteration run ramps ``p_max`` over its first 1200
+iterations. Runs at least as long as the paper's keep the paper's absolute iteration counts.
+
+Both schedules are pure functions of ``(iteration, total_iterations)``;
+:class:`~dynpush.policies.runner.CaTOnPolicyRunner` applies them at the start of every learning iteration.
+"""
+
+from __future__ import annotations
+
+import torch
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+CONSTRAINT_GROUPS: tuple[tuple[str, int], ...] = (
+    ("base_command", 6),
+    ("arm_command", 5),
+    ("arm_action_rate", 5),
+    ("arm_joint_position", 5),
+    ("arm_joint_velocity", 5),
+    ("arm_joint_torque", 5),
+    ("leg_joint_torque", 12),
+    ("collision", 18),
+    ("object_balance", 1),
+)
+"""Constraint groups ``(name, dim)`` in column order of ``extras["constraints"]`` (Table "Rewards and constraints")."""
+
+
+def _paper_p_max() -> dict[str, tuple[float, float]]:
+    # Table "Rewards and constraints", column p_i^max: (initial, final); collision and object balance are fixed.
+    return {
+        "base_command": (0.01, 0.2),
+        "arm_command": (0.05, 0.9),
+        "arm_action_rate": (0.0, 0.05),
+        "arm_joint_position": (0.05, 0.9),
+        "arm_joint_velocity": (0.05, 0.9),
+        "arm_joint_torque": (0.0, 0.015),
+        "leg_joint_torque": (0.0, 0.01),
+        "collision": (1.0, 1.0),
+        "object_balance": (0.25, 0.25),
+    }
+
+
+@dataclass
+class ConstraintCurriculumConfig:
+    """Linear ``p_max`` curriculum per constraint group."""
+
+    p_max: dict[str, tuple[float, float]] = field(default_factory=_paper_p_max)
+    """Group name -> (initial, final) maximum termination probability (Table "Rewards and constraints")."""
+
+    ramp_iterations: int = 12000
+    """Iterations over which ``p_max`` rises from initial to final, in paper iterations (Table: 0 -> 12e3)."""
+
+
+@dataclass
+class ReachWeightConfig:
+    """Step schedule of the reach-reward weight ``w2``."""
+
+    weight: float = 1.25
+    """Initial weight ``w2`` (Sec. "Rewards & constraints")."""
+
+    divisor: float = 4.0
+    """``w2`` is divided by this factor after the switch (Sec. "Rewards & constraints")."""
+
+    switch_iteration: int = 1500
+    """Iteration of the switch, in paper iterations (Sec. "Rewards & constraints")."""
+
+
+@dataclass
+class ScheduleConfig:
+    """All iteration schedules of a training run."""
+
+    constraints: ConstraintCurriculumConfig = field(default_factory=ConstraintCurriculumConfig)
+    """CaT ``p_max`` curricula."""
+
+    reach: ReachWeightConfig = field(default_factory=ReachWeightConfig)
+    """Reach-reward weight schedule."""
+
+    paper_iterations: int = 20000
+    """Length of the paper's training run (Sec. "RL goal pushing environment": 20000 iterations)."""
+
+    scale_with_run_length: bool = True
+    """Compress schedules of runs shorter than ``paper_iterations`` by ``total_iterations / paper_iterations``.
+
+    False keeps the paper's absolute iteration counts whatever the run length."""
+
+    @classmethod
+    def from_dict(cls, cfg: dict) -> ScheduleConfig:
+        """Build from a nested dict (e.g. the ``"schedule"`` entry of a runner config); missing keys keep defaults."""
+        cfg = dict(cfg)
+        constraints = dict(cfg.pop("constraints", {}))
+        if "p_max" in constraints:
+            constraints["p_max"] = {name: (float(a), float(b)) for name, (a, b) in constraints["p_max"].items()}
+        return cls(
+            constraints=ConstraintCurriculumConfig(**constraints),
+            reach=ReachWeightConfig(**cfg.pop("reach", {})),
+            **cfg,
+        )
+
+
+def scaled_iterations(paper_iterations: float, total_iterations: int, cfg: ScheduleConfig) -> float:
+    """Map an iteration count of the paper's run onto a run of ``total_iterations``."""
+    if not cfg.scale_with_run_length or total_iterations >= cfg.paper_iterations:
+        return float(paper_iterations)
+    return paper_iterations * total_iterations / cfg.paper_iterations
+
+
+def p_max_at(
+    iteration: int,
+    total_iterations: int,
+    cfg: ScheduleConfig | None = None,
+    groups: Sequence[tuple[str, int]] = CONSTRAINT_GROUPS,
+) -> torch.Tensor:
+    """Per-column maximum termination probability at ``iteration`` of a run of ``total_iterations``.
+
+    Args:
+        iteration: Learning iteration (0-based).
+        total_iterations: Length of the run in iterations.
+        cfg: Schedules; paper defaults when None.
+        groups: Constraint groups ``(name, dim)`` in column order.
+
+    Returns:
+        Float tensor of shape ``[sum(dims)]``.
+    """
+    cfg = cfg or ScheduleConfig()
+    ramp = scaled_iterations(cfg.constraints.ramp_iterations, total_iterations, cfg)
+    progress = min(max(iteration / ramp, 0.0), 1.0) if ramp > 0 else 1.0
+    values = []
+    for name, dim in groups:
+        initial, final = cfg.constraints.p_max[name]
+        values += [initial + (final - initial) * progress] * dim
+    return torch.tensor(values, dtype=torch.float)
+
+
+def reach_weight_at(iteration: int, total_iterations: int, cfg: ScheduleConfig | None = None) -> float:
+    """Reach-reward weight ``w2`` at ``iteration`` of a run of ``total_iterations``."""
+    cfg = cfg or ScheduleConfig()
+    switch = scaled_iterations(cfg.reach.switch_iteration, total_iterations, cfg)
+    return cfg.reach.weight / cfg.reach.divisor if iteration >= switch else cfg.reach.weight

@@ -1,0 +1,385 @@
+"""PushEnv: N push worlds in one Newton model, as an rsl_rl ``VecEnv``.
+
+One control step (50 Hz) is one captured Warp graph: action processing, ``substeps`` physics
+substeps (tracking wrench, collision, contact classification, solver), random pushes, joint
+readings, rewards, constraints, terminations, auto-reset of finished worlds and observations. The
+torch tensors handed to the trainer are zero-copy views of the Warp buffers.
+"""
+
+from __future__ import annotations
+
+import math
+
+import newton
+import numpy as np
+import torch
+import warp as wp
+from rsl_rl.env import VecEnv
+from tensordict import TensorDict
+
+from dynpush.kernels import (
+    actions as actions_k,
+    base_tracking,
+    constraints as constraints_k,
+    contacts as contacts_k,
+    observations as observations_k,
+    rewards as rewards_k,
+    sampling,
+    terminations,
+)
+from dynpush.kernels.views import CONTACT_COLUMNS, NUM_ACTIONS, NUM_ARM_JOINTS, NUM_CRITIC_OBS, NUM_POLICY_OBS, PushTask, RobotView
+
+from .config import PushEnvConfig
+from .scene import Scene, build_scene
+
+wp.config.enable_backward = False  # halves Newton's cold kernel compile (NEWTON_NOTES.md)
+
+REWARD_TERMS = ("task", "reach", "object_velocity", "action_rate")
+CONSTRAINT_GROUPS = constraints_k.CONSTRAINT_GROUPS
+
+
+@wp.kernel
+def _articulation_mask(reset: wp.array(dtype=int), articulation_world: wp.array(dtype=int), mask: wp.array(dtype=bool)):
+    a = wp.tid()
+    w = articulation_world[a]
+    mask[a] = w >= 0 and reset[w] != 0
+
+
+class PushEnv(VecEnv):
+    """Goal pushing with a tracked-base mobile manipulator (paper III); see the module docstring."""
+
+    def __init__(self, cfg: PushEnvConfig):
+        self.cfg = cfg.validate()
+        self.num_envs = cfg.num_envs
+        self.num_actions = NUM_ACTIONS
+        self.max_episode_length = cfg.max_episode_steps
+        self.device = cfg.device
+        self.wp_device = wp.get_device(cfg.device)
+        self.constraint_groups = list(CONSTRAINT_GROUPS)
+        with wp.ScopedDevice(self.wp_device):
+            self.scene = build_scene(cfg.num_envs, cfg.device, cfg.sim.ground_friction)
+            self._make_solver()
+            self._make_buffers()
+            self._make_params()
+            self.reset()
+            self._graph = None
+            if self.wp_device.is_cpu or self.wp_device.is_cuda:
+                with wp.ScopedCapture() as capture:
+                    self._step_kernels()
+                self._graph = capture.graph
+
+    # ------------------------------------------------------------------ construction
+    def _make_solver(self) -> None:
+        model = self.scene.model
+        if self.cfg.sim.solver == "xpbd":
+            # Contact weighting off: with it, pushing was feeble (NEWTON_NOTES.md pitfall 1).
+            self.solver = newton.solvers.SolverXPBD(
+                model, iterations=self.cfg.sim.xpbd_iterations, rigid_contact_con_weighting=False
+            )
+        else:
+            self.solver = newton.solvers.SolverMuJoCo(model)
+        self.state_0 = model.state()
+        self.state_1 = model.state()
+        self.control = model.control()
+        self.collision = newton.CollisionPipeline(model)
+        self.contacts = self.collision.contacts()
+
+    def _make_buffers(self) -> None:
+        n, scene = self.num_envs, self.scene
+        i32 = lambda a: wp.array(np.asarray(a, dtype=np.int32), dtype=int)  # noqa: E731
+        zeros = lambda shape, dtype=float: wp.zeros(shape, dtype=dtype)  # noqa: E731
+
+        task = PushTask()
+        task.goal_pos = zeros(n, wp.vec3)
+        task.goal_quat = wp.array(np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)), dtype=wp.quat)
+        task.reach_target_o = zeros(n, wp.vec3)
+        task.object_dims = wp.array(np.tile([0.5, 0.5, 0.7], (n, 1)), dtype=wp.vec3)
+        task.object_shape = zeros(n, int)
+        task.object_mass = wp.full(n, 1.0, dtype=float)
+        task.object_com_o = zeros(n, wp.vec3)
+        task.object_inertia = wp.array(np.ones((n, 3)), dtype=wp.vec3)
+        task.object_friction = zeros(n)
+        task.arm_default = wp.array(scene.robot.arm_default[:NUM_ARM_JOINTS], dtype=float)
+        task.actions = zeros((n, NUM_ACTIONS))
+        task.last_actions = zeros((n, NUM_ACTIONS))
+        task.base_command = zeros((n, 6))
+        task.base_command_filtered = zeros((n, 6))
+        task.base_wrench_b = zeros(n, wp.spatial_vector)
+        task.arm_command = zeros((n, NUM_ARM_JOINTS))
+        task.contacts = zeros((n, CONTACT_COLUMNS), int)
+        task.episode_step = zeros(n, int)
+        task.reach_reward_held = zeros(n)
+        task.next_push_step = zeros(n, int)
+        task.rng_counter = zeros(n, int)
+        r = self.cfg.rewards
+        task.reward_weights = wp.array(
+            [r.task_weight, r.reach_weight, r.object_velocity_weight, r.action_rate_weight], dtype=float
+        )
+        self.task = task
+
+        model = scene.model
+        self.views = [self._robot_view(s) for s in (self.state_0, self.state_1)]
+        self.raw_actions = zeros((n, NUM_ACTIONS))
+        self.policy_obs = zeros((n, NUM_POLICY_OBS))
+        self.critic_obs = zeros((n, NUM_CRITIC_OBS))
+        self.reward = zeros(n)
+        self.reward_terms = zeros((n, len(REWARD_TERMS)))
+        self.success = zeros(n, int)
+        self.reset_flags = zeros(n, int)
+        self.time_out = zeros(n, int)
+        self.episode_success = wp.full(n, -1, dtype=int)
+        self.episode_toppled = zeros(n, int)
+        self.constraints = zeros((n, constraints_k.NUM_CONSTRAINTS))
+        self.variant = zeros(n, int)
+        self.articulation_mask = wp.zeros(model.articulation_count, dtype=bool)
+        self.shape_role = i32(scene.shape_role)
+        self.shape_self_column = i32(scene.shape_self_column)
+        self.object_body = i32(scene.object_body)
+        self.object_shape = i32(scene.object_shape)
+        self.robot_q_start = i32(scene.robot_q_start)
+        self.robot_qd_start = i32(scene.robot_qd_start)
+        self.object_q_start = i32(scene.object_q_start)
+        self.object_qd_start = i32(scene.object_qd_start)
+
+        # Zero-copy torch views.
+        t = wp.to_torch
+        self.actions_t = t(self.raw_actions)
+        self.policy_obs_t = t(self.policy_obs)
+        self.critic_obs_t = t(self.critic_obs)
+        self.reward_t = t(self.reward)
+        self.reward_terms_t = t(self.reward_terms)
+        self.reset_t = t(self.reset_flags)
+        self.time_out_t = t(self.time_out)
+        self.constraints_t = t(self.constraints)
+        self.episode_success_t = t(self.episode_success)
+        self.episode_toppled_t = t(self.episode_toppled)
+        self.success_t = t(self.success)
+        self.episode_length_buf = t(task.episode_step)
+
+    def _robot_view(self, state: newton.State) -> RobotView:
+        scene, model = self.scene, self.scene.model
+        i32 = lambda a: wp.array(np.asarray(a, dtype=np.int32), dtype=int)  # noqa: E731
+        view = RobotView()
+        view.body_q = state.body_q
+        view.body_qd = state.body_qd
+        view.body_com = model.body_com
+        view.body_mass = model.body_mass
+        view.joint_q = state.joint_q
+        view.joint_qd = state.joint_qd
+        view.base_body = i32(scene.base_body)
+        view.object_body = i32(scene.object_body)
+        view.ee_body = i32(scene.ee_body)
+        view.arm_q_start = i32(scene.arm_q_start)
+        view.arm_qd_start = i32(scene.arm_qd_start)
+        view.robot_body_start = i32(scene.robot_body_start)
+        view.robot_body_count = scene.robot_body_count
+        view.ee_offset = wp.vec3(*scene.ee_offset)
+        return view
+
+    def _make_params(self) -> None:
+        cfg, robot = self.cfg, self.scene.robot
+        f32 = lambda a: wp.array(np.asarray(a, dtype=np.float32), dtype=float)  # noqa: E731
+        self.base_default = f32(cfg.actions.base_default)
+        self.base_scale = f32(cfg.actions.base_scale)
+
+        b = cfg.base
+        tracking = base_tracking.BaseTrackingParams()
+        tracking.dt = cfg.control_dt / cfg.sim.substeps
+        tracking.time_constant = b.time_constant
+        tracking.velocity_gain = b.velocity_gain
+        tracking.yaw_rate_gain = b.yaw_rate_gain
+        tracking.attitude_stiffness = b.height_frequency**2
+        tracking.attitude_damping = 2.0 * b.damping_ratio * b.height_frequency
+        tracking.max_horizontal_force = b.max_horizontal_force
+        tracking.max_vertical_force = b.max_vertical_force
+        tracking.max_torque = wp.vec3(*b.max_torque)
+        tracking.attitude_inertia = wp.vec3(*b.attitude_inertia)
+        tracking.gravity = 9.81
+        self.tracking_params = tracking
+
+        r = cfg.rewards
+        rp = rewards_k.RewardParams()
+        rp.sigma_reach, rp.sigma_velocity, rp.sigma_task = r.sigma_reach, r.sigma_velocity, r.sigma_task
+        rp.sigma_base_rate, rp.sigma_arm_rate = r.sigma_base_rate, r.sigma_arm_rate
+        rp.success_task_reward = r.success_task_reward
+        rp.success_distance = r.success_distance
+        rp.success_angle = math.radians(r.success_angle_deg)
+        rp.arm_scale = cfg.actions.arm_scale
+        self.reward_params = rp
+
+        c = cfg.constraints
+        arm = constraints_k.ArmLimits()
+        arm.lower = f32(robot.arm_lower[:NUM_ARM_JOINTS])
+        arm.upper = f32(robot.arm_upper[:NUM_ARM_JOINTS])
+        arm.velocity = f32(robot.arm_velocity_limit[:NUM_ARM_JOINTS])
+        arm.stiffness = f32(robot.arm_stiffness[:NUM_ARM_JOINTS])
+        arm.damping = f32(robot.arm_damping[:NUM_ARM_JOINTS])
+        arm.peak_torque = f32(robot.arm_peak_torque[:NUM_ARM_JOINTS])
+        arm.nominal_torque = f32(c.arm_nominal_torque)
+        self.arm_limits = arm
+        cp = constraints_k.ConstraintParams()
+        cp.base_lower = f32(c.base_command_lower)
+        cp.base_upper = f32(c.base_command_upper)
+        cp.leg_torque_map = wp.array(robot.leg_torque_map.astype(np.float32), dtype=float)
+        cp.leg_nominal_torque = f32(np.tile(c.leg_nominal_torque, 4))
+        cp.object_tilt_limit = math.radians(c.object_tilt_limit_deg)
+        cp.base_moving_speed = c.base_moving_speed
+        cp.arm_scale = cfg.actions.arm_scale
+        cp.control_dt = cfg.control_dt
+        self.constraint_params = cp
+
+        t = cfg.terminations
+        tp = terminations.TerminationParams()
+        tp.object_topple = math.radians(t.object_topple_deg)
+        tp.base_tilt = math.radians(t.base_tilt_deg)
+        tp.base_min_height = t.base_min_height
+        tp.max_episode_steps = cfg.max_episode_steps
+        self.termination_params = tp
+
+        s, rnd = cfg.sampling, cfg.randomization
+        sp = sampling.SamplingParams()
+        sp.robot_radius = wp.vec2(*s.robot_radius)
+        sp.goal_radius = s.goal_radius
+        sp.yaw_range = wp.vec2(*s.yaw_range)
+        sp.surface_target = int(s.reach_target_on_surface)
+        sp.friction = wp.vec2(*rnd.friction)
+        sp.ground_friction = cfg.sim.ground_friction
+        sp.mass = wp.vec2(*rnd.mass)
+        sp.com_fraction_lo = wp.vec3(rnd.com_fraction_x[0], rnd.com_fraction_y[0], rnd.com_fraction_z[0])
+        sp.com_fraction_hi = wp.vec3(rnd.com_fraction_x[1], rnd.com_fraction_y[1], rnd.com_fraction_z[1])
+        sp.size_lo = wp.vec3(rnd.size_x[0], rnd.size_y[0], rnd.size_z[0])
+        sp.size_hi = wp.vec3(rnd.size_x[1], rnd.size_y[1], rnd.size_z[1])
+        sp.cylinder_probability = rnd.cylinder_probability
+        sp.base_mass_offset = wp.vec2(*rnd.base_mass_offset)
+        sp.push_interval_steps = wp.vec2(rnd.push_interval_s[0] / cfg.control_dt, rnd.push_interval_s[1] / cfg.control_dt)
+        sp.push_velocity = rnd.push_velocity
+        sp.arm_joint_noise = rnd.arm_joint_noise
+        sp.base_height = cfg.actions.base_default[5]
+        sp.frozen_joint_value = float(robot.arm_default[NUM_ARM_JOINTS])
+        self.sampling_params = sp
+
+        noise = cfg.noise
+        scales = []
+        for name, size in observations_k.POLICY_TERMS:
+            scales += [getattr(noise, name, 0.0)] * size
+        self.noise_scale = f32(scales)
+
+    # ------------------------------------------------------------------ the step
+    def _launch(self, kernel, inputs):
+        wp.launch(kernel, dim=self.num_envs, inputs=inputs, device=self.wp_device)
+
+    def _physics_substeps(self) -> None:
+        model, cfg = self.scene.model, self.cfg
+        dt = cfg.control_dt / cfg.sim.substeps
+        states = [self.state_0, self.state_1]
+        c = self.contacts
+        for sub in range(cfg.sim.substeps):
+            state_in, state_out = states[sub % 2], states[(sub + 1) % 2]
+            view = self.views[sub % 2]
+            state_in.clear_forces()
+            self._launch(base_tracking.apply_base_wrench, [view, self.task, self.tracking_params, state_in.body_f])
+            self.collision.collide(state_in, c)
+            wp.launch(
+                contacts_k.classify_contacts,
+                dim=c.rigid_contact_max,
+                inputs=[c.rigid_contact_count, c.rigid_contact_shape0, c.rigid_contact_shape1, c.rigid_contact_point0,
+                        c.rigid_contact_point1, c.rigid_contact_normal, c.rigid_contact_margin0, c.rigid_contact_margin1,
+                        model.shape_body, model.shape_world, self.shape_role, self.shape_self_column, state_in.body_q,
+                        cfg.constraints.contact_distance, self.task],
+                device=self.wp_device,
+            )
+            self.solver.step(state_in, state_out, self.control, c, dt)
+
+    def _step_kernels(self) -> None:
+        """Everything of one control step; captured once into a graph."""
+        cfg, model, view = self.cfg, self.scene.model, self.views[0]
+        seed = cfg.seed
+        self._launch(actions_k.process_actions, [self.raw_actions, view, self.task, self.base_default, self.base_scale,
+                                                 cfg.actions.arm_scale, cfg.actions.clip, self.control.joint_target_q])
+        self.task.contacts.zero_()
+        self._physics_substeps()
+        self._launch(sampling.apply_pushes, [seed, self.sampling_params, view, self.task, self.state_0.body_qd])
+        newton.eval_ik(model, self.state_0, self.state_0.joint_q, self.state_0.joint_qd)
+        self._launch(rewards_k.compute_rewards, [view, self.task, self.reward_params, self.base_scale, self.reward,
+                                                 self.reward_terms, self.success])
+        self._launch(constraints_k.compute_constraints, [view, self.task, self.arm_limits, self.constraint_params, self.constraints])
+        self._launch(terminations.compute_terminations, [view, self.task, self.termination_params, self.success,
+                                                         self.reset_flags, self.time_out, self.episode_success, self.episode_toppled])
+        self._reset_flagged()
+        self._launch(observations_k.compute_observations, [view, self.task, self.noise_scale, int(cfg.noise.enabled), seed,
+                                                           self.policy_obs, self.critic_obs])
+
+    def _reset_flagged(self) -> None:
+        """Draws new episodes for worlds with ``reset_flags != 0`` (inside the captured step)."""
+        model, view, cfg = self.scene.model, self.views[0], self.cfg
+        self._launch(sampling.sample_episodes, [
+            self.reset_flags, cfg.seed, self.sampling_params, view, self.task, self.base_default,
+            self.scene.robot.base_mass, self.robot_q_start, self.object_q_start, self.state_0.joint_q,
+            self.state_0.joint_qd, model.body_mass, model.body_inv_mass, self.variant])
+        flags = model.select_body_variants(self.variant, bodies=self.object_body)
+        self._launch(sampling.apply_object_properties, [
+            self.reset_flags, self.task, self.object_body, self.object_shape, model.shape_scale,
+            model.shape_collision_radius, model.shape_collision_aabb_lower, model.shape_collision_aabb_upper,
+            model.shape_material_mu, model.body_mass, model.body_inv_mass, model.body_com, model.body_inertia,
+            model.body_inv_inertia])
+        self._launch(sampling.zero_velocities, [self.reset_flags, self.robot_qd_start, self.scene.robot_qd_count,
+                                                self.object_qd_start, self.state_0.joint_qd])
+        wp.launch(_articulation_mask, dim=model.articulation_count,
+                  inputs=[self.reset_flags, model.articulation_world, self.articulation_mask], device=self.wp_device)
+        newton.eval_fk(model, self.state_0.joint_q, self.state_0.joint_qd, self.state_0, mask=self.articulation_mask)
+        self.solver.notify_model_changed(flags)
+
+    # ------------------------------------------------------------------ VecEnv
+    def reset(self) -> TensorDict:
+        """Resets every world (outside the graph) and returns the first observations."""
+        with wp.ScopedDevice(self.wp_device):
+            self.reset_flags.fill_(1)
+            self._reset_flagged()
+            self.control.joint_target_q.assign(self.state_0.joint_q)
+            self._launch(observations_k.compute_observations, [self.views[0], self.task, self.noise_scale,
+                                                               int(self.cfg.noise.enabled), self.cfg.seed,
+                                                               self.policy_obs, self.critic_obs])
+        return self.get_observations()
+
+    def get_observations(self) -> TensorDict:
+        return TensorDict({"policy": self.policy_obs_t, "critic": self.critic_obs_t}, batch_size=[self.num_envs])
+
+    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
+        self.actions_t.copy_(actions)
+        with wp.ScopedDevice(self.wp_device):
+            if self._graph is not None:
+                wp.capture_launch(self._graph)
+            else:
+                self._step_kernels()
+        dones = self.reset_t.to(torch.long)
+        extras = {
+            "time_outs": self.time_out_t.to(torch.bool),
+            "constraints": self.constraints_t,
+            "log": self._episode_log(),
+        }
+        return self.get_observations(), self.reward_t, dones, extras
+
+    def set_reward_weight(self, name: str, value: float) -> None:
+        """Changes one reward weight (``task``, ``reach``, ``object_velocity``, ``action_rate``)."""
+        if name not in REWARD_TERMS:
+            raise KeyError(f"reward weight name must be one of {REWARD_TERMS}, got {name!r}")
+        weights = self.task.reward_weights.numpy()
+        weights[REWARD_TERMS.index(name)] = value
+        self.task.reward_weights.assign(weights)
+
+    def _episode_log(self) -> dict[str, float]:
+        """Metrics of the episodes that ended this step and per-group constraint violation rates."""
+        log = {}
+        ended = self.episode_success_t >= 0
+        count = int(ended.sum())
+        if count:
+            log["/episode/success"] = float((self.episode_success_t[ended] == 1).float().mean())
+            log["/episode/toppled"] = float(self.episode_toppled_t[ended].float().mean())
+        start = 0
+        for name, size in CONSTRAINT_GROUPS:
+            violated = (self.constraints_t[:, start : start + size] > 0.0).any(dim=1)
+            log[f"/constraints/{name}"] = float(violated.float().mean())
+            start += size
+        for i, name in enumerate(REWARD_TERMS):
+            log[f"/reward/{name}"] = float(self.reward_terms_t[:, i].mean())
+        return log

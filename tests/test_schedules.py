@@ -1,0 +1,92 @@
+"""Schedules of the push task: p_max curricula and the reach-reward weight (Table "Rewards and constraints")."""
+
+import pytest
+import torch
+
+from dynpush.policies.schedules import CONSTRAINT_GROUPS, ScheduleConfig, p_max_at, reach_weight_at
+
+torch.set_num_threads(1)
+
+PAPER = {  # Table "Rewards and constraints": (dim, initial p_max, final p_max)
+    "base_command": (6, 0.01, 0.2),
+    "arm_command": (5, 0.05, 0.9),
+    "arm_action_rate": (5, 0.0, 0.05),
+    "arm_joint_position": (5, 0.05, 0.9),
+    "arm_joint_velocity": (5, 0.05, 0.9),
+    "arm_joint_torque": (5, 0.0, 0.015),
+    "leg_joint_torque": (12, 0.0, 0.01),
+    "collision": (18, 1.0, 1.0),
+    "object_balance": (1, 0.25, 0.25),
+}
+
+
+def _expected(progress: float) -> torch.Tensor:
+    values = []
+    for _, (dim, initial, final) in PAPER.items():
+        values += [initial + (final - initial) * progress] * dim
+    return torch.tensor(values)
+
+
+def _group(p_max: torch.Tensor, name: str) -> torch.Tensor:
+    start = 0
+    for group, dim in CONSTRAINT_GROUPS:
+        if group == name:
+            return p_max[start : start + dim]
+        start += dim
+    raise KeyError(name)
+
+
+def test_groups_match_paper_table():
+    assert [(name, dim) for name, (dim, _, _) in PAPER.items()] == list(CONSTRAINT_GROUPS)
+    assert sum(dim for _, dim in CONSTRAINT_GROUPS) == 62
+
+
+def test_paper_run_endpoints_and_midpoints():
+    total = 20000
+    torch.testing.assert_close(p_max_at(0, total), _expected(0.0))
+    torch.testing.assert_close(p_max_at(12000, total), _expected(1.0))
+    torch.testing.assert_close(p_max_at(19999, total), _expected(1.0))
+    torch.testing.assert_close(p_max_at(6000, total), _expected(0.5))
+    torch.testing.assert_close(p_max_at(3000, total), _expected(0.25))
+    mid = _group(p_max_at(6000, total), "arm_command")
+    torch.testing.assert_close(mid, torch.full((5,), 0.475))
+    for it in (0, 6000, 20000):  # no curriculum for collisions and object balance
+        assert torch.all(_group(p_max_at(it, total), "collision") == 1.0)
+        assert torch.all(_group(p_max_at(it, total), "object_balance") == 0.25)
+
+
+def test_short_run_scales_with_length():
+    total = 2000  # ramp over 1200 iterations, w2 switch at 150
+    torch.testing.assert_close(p_max_at(600, total), _expected(0.5))
+    torch.testing.assert_close(p_max_at(1200, total), _expected(1.0))
+    torch.testing.assert_close(p_max_at(300, total), _expected(0.25))
+    assert reach_weight_at(149, total) == 1.25
+    assert reach_weight_at(150, total) == pytest.approx(1.25 / 4)
+
+
+def test_paper_absolute_iterations_flag():
+    cfg = ScheduleConfig(scale_with_run_length=False)
+    torch.testing.assert_close(p_max_at(600, 2000, cfg), _expected(0.05))
+    assert reach_weight_at(1499, 2000, cfg) == 1.25
+    assert reach_weight_at(1500, 2000, cfg) == pytest.approx(0.3125)
+
+
+def test_long_run_keeps_paper_iterations():
+    torch.testing.assert_close(p_max_at(6000, 40000), _expected(0.5))
+    assert reach_weight_at(1500, 40000) == pytest.approx(0.3125)
+
+
+def test_reach_weight_switch_paper_run():
+    assert reach_weight_at(0, 20000) == 1.25
+    assert reach_weight_at(1499, 20000) == 1.25
+    assert reach_weight_at(1500, 20000) == pytest.approx(0.3125)
+    assert reach_weight_at(19999, 20000) == pytest.approx(0.3125)
+
+
+def test_from_dict_overrides_and_custom_groups():
+    cfg = ScheduleConfig.from_dict(
+        {"constraints": {"p_max": {"a": [0.0, 1.0]}, "ramp_iterations": 10}, "reach": {"weight": 2.0}}
+    )
+    assert cfg.scale_with_run_length and cfg.paper_iterations == 20000
+    torch.testing.assert_close(p_max_at(5, 20000, cfg, groups=[("a", 2)]), torch.tensor([0.5, 0.5]))
+    assert reach_weight_at(0, 20000, cfg) == 2.0

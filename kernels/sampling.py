@@ -81,35 +81,32 @@ def surface_point(rng: wp.uint32, shape: int, d: wp.vec3):
     return wp.vec3(s - 0.5 * d[0], -0.5 * d[1], z)
 
 
-@wp.kernel
-def sample_episodes(
-    reset: wp.array(dtype=int),
-    seed: int,
-    params: SamplingParams,
-    robot: RobotView,
-    task: PushTask,
-    base_default: wp.array(dtype=float),
-    base_mass_nominal: float,
-    robot_q_start: wp.array(dtype=int),
-    object_q_start: wp.array(dtype=int),
-    joint_q: wp.array(dtype=float),
-    joint_qd: wp.array(dtype=float),
-    body_mass: wp.array(dtype=float),
-    body_inv_mass: wp.array(dtype=float),
-    variant: wp.array(dtype=int),
-):
-    """Draws a new episode for every world with ``reset[w] != 0``; ``variant[w]`` = -1 elsewhere.
+@wp.struct
+class EpisodeSpec:
+    """Per-world description of an episode: drawn by ``sample_episodes`` or written by the user
+    (evaluation scenarios), and applied by ``start_episodes``."""
 
-    Writes the generalized coordinates of the robot (free base + 6 arm joints) and the object
-    (free joint) into ``joint_q``/``joint_qd``; the environment then runs forward kinematics.
-    """
+    shape: wp.array(dtype=int)  # SHAPE_CUBOID or SHAPE_CYLINDER
+    dims: wp.array(dtype=wp.vec3)  # full side lengths [m] (cylinder: diameter, diameter, height)
+    mass: wp.array(dtype=float)  # [kg]
+    com_o: wp.array(dtype=wp.vec3)  # CoM in the object frame [m]
+    friction: wp.array(dtype=float)  # combined object-floor coefficient
+    object_yaw: wp.array(dtype=float)  # [rad]; the object stands at the env origin
+    reach_target_o: wp.array(dtype=wp.vec3)  # object frame [m]
+    goal: wp.array(dtype=wp.vec3)  # (x [m], y [m], yaw [rad])
+    base: wp.array(dtype=wp.vec3)  # (x [m], y [m], yaw [rad])
+    arm_q: wp.array2d(dtype=float)  # (N, 5) initial arm joints [rad]
+    base_mass_offset: wp.array(dtype=float)  # [kg]
+    first_push_step: wp.array(dtype=int)  # control steps until the first random push
+
+
+@wp.kernel
+def sample_episodes(reset: wp.array(dtype=int), seed: int, params: SamplingParams, task: PushTask, spec: EpisodeSpec):
+    """Draws the episode of every world with ``reset[w] != 0`` into ``spec`` (paper III-B, III-E)."""
     w = wp.tid()
-    variant[w] = -1
     if reset[w] == 0:
         return
     rng = next_rng(seed, task.rng_counter, w)
-
-    # Object.
     shape = wp.where(wp.randf(rng) < params.cylinder_probability, SHAPE_CYLINDER, SHAPE_CUBOID)
     d = wp.vec3(
         wp.randf(rng, params.size_lo[0], params.size_hi[0]),
@@ -118,76 +115,107 @@ def sample_episodes(
     )
     if shape == SHAPE_CYLINDER:
         d = wp.vec3(d[0], d[0], d[2])
-    m = uniform(rng, params.mass)
-    com = wp.vec3(
+    spec.shape[w] = shape
+    spec.dims[w] = d
+    spec.mass[w] = uniform(rng, params.mass)
+    spec.com_o[w] = wp.vec3(
         wp.randf(rng, params.com_fraction_lo[0], params.com_fraction_hi[0]) * d[0],
         wp.randf(rng, params.com_fraction_lo[1], params.com_fraction_hi[1]) * d[1],
         wp.randf(rng, params.com_fraction_lo[2], params.com_fraction_hi[2]) * d[2],
     )
-    task.object_shape[w] = shape
-    task.object_dims[w] = d
-    task.object_mass[w] = m
-    task.object_com_o[w] = com
-    task.object_inertia[w] = wp.where(shape == SHAPE_CYLINDER, cylinder_inertia(m, d), cuboid_inertia(m, d))
-    task.object_friction[w] = 2.0 * uniform(rng, params.friction) - params.ground_friction
-    variant[w] = shape
-
-    q_object = yaw_quat(uniform(rng, params.yaw_range))
-    o = object_q_start[w]
-    joint_q[o + 0] = 0.0
-    joint_q[o + 1] = 0.0
-    joint_q[o + 2] = 0.5 * d[2]
-    joint_q[o + 3] = q_object[0]
-    joint_q[o + 4] = q_object[1]
-    joint_q[o + 5] = q_object[2]
-    joint_q[o + 6] = q_object[3]
-
-    task.reach_target_o[w] = wp.vec3(0.0)
+    spec.friction[w] = uniform(rng, params.friction)
+    spec.object_yaw[w] = uniform(rng, params.yaw_range)
+    spec.reach_target_o[w] = wp.vec3(0.0)
     if params.surface_target != 0:
-        task.reach_target_o[w] = surface_point(rng, shape, d)
-
-    # Goal: uniform by area in the disc.
+        spec.reach_target_o[w] = surface_point(rng, shape, d)
+    # Goal uniform by area in the disc; robot uniform by area in the annulus.
     r_goal = params.goal_radius * wp.sqrt(wp.randf(rng))
     a_goal = wp.randf(rng, -wp.pi, wp.pi)
-    task.goal_pos[w] = wp.vec3(r_goal * wp.cos(a_goal), r_goal * wp.sin(a_goal), 0.5 * d[2])
-    task.goal_quat[w] = yaw_quat(uniform(rng, params.yaw_range))
-
-    # Robot: uniform by area in the annulus.
+    spec.goal[w] = wp.vec3(r_goal * wp.cos(a_goal), r_goal * wp.sin(a_goal), uniform(rng, params.yaw_range))
     r_lo = params.robot_radius[0]
     r_hi = params.robot_radius[1]
     r_robot = wp.sqrt(wp.randf(rng, r_lo * r_lo, r_hi * r_hi))
     a_robot = wp.randf(rng, -wp.pi, wp.pi)
-    q_base = yaw_quat(uniform(rng, params.yaw_range))
-    b = robot_q_start[w]
-    joint_q[b + 0] = r_robot * wp.cos(a_robot)
-    joint_q[b + 1] = r_robot * wp.sin(a_robot)
-    joint_q[b + 2] = params.base_height
-    joint_q[b + 3] = q_base[0]
-    joint_q[b + 4] = q_base[1]
-    joint_q[b + 5] = q_base[2]
-    joint_q[b + 6] = q_base[3]
+    spec.base[w] = wp.vec3(r_robot * wp.cos(a_robot), r_robot * wp.sin(a_robot), uniform(rng, params.yaw_range))
+    for j in range(NUM_ARM_JOINTS):
+        spec.arm_q[w, j] = task.arm_default[j] + wp.randf(rng, -params.arm_joint_noise, params.arm_joint_noise)
+    spec.base_mass_offset[w] = uniform(rng, params.base_mass_offset)
+    spec.first_push_step[w] = int(uniform(rng, params.push_interval_steps))
+
+
+@wp.func
+def write_free_joint(joint_q: wp.array(dtype=float), start: int, p: wp.vec3, q: wp.quat):
+    for i in range(3):
+        joint_q[start + i] = p[i]
+    for i in range(4):
+        joint_q[start + 3 + i] = q[i]
+
+
+@wp.kernel
+def start_episodes(
+    reset: wp.array(dtype=int),
+    spec: EpisodeSpec,
+    params: SamplingParams,
+    robot: RobotView,
+    task: PushTask,
+    base_default: wp.array(dtype=float),
+    base_mass_nominal: float,
+    robot_q_start: wp.array(dtype=int),
+    object_q_start: wp.array(dtype=int),
+    joint_q: wp.array(dtype=float),
+    body_mass: wp.array(dtype=float),
+    body_inv_mass: wp.array(dtype=float),
+    variant: wp.array(dtype=int),
+):
+    """Applies ``spec`` to every world with ``reset[w] != 0``; ``variant[w]`` = -1 elsewhere.
+
+    Writes the task buffers and the generalized coordinates of the robot (free base at nominal
+    height + 6 arm joints) and the object (free joint, resting on the floor) into ``joint_q``; the
+    environment then selects the object variant and runs forward kinematics.
+    """
+    w = wp.tid()
+    variant[w] = -1
+    if reset[w] == 0:
+        return
+    shape = spec.shape[w]
+    d = spec.dims[w]
+    m = spec.mass[w]
+    task.object_shape[w] = shape
+    task.object_dims[w] = d
+    task.object_mass[w] = m
+    task.object_com_o[w] = spec.com_o[w]
+    task.object_inertia[w] = wp.where(shape == SHAPE_CYLINDER, cylinder_inertia(m, d), cuboid_inertia(m, d))
+    # Newton combines two coefficients by their mean.
+    task.object_friction[w] = 2.0 * spec.friction[w] - params.ground_friction
+    task.reach_target_o[w] = spec.reach_target_o[w]
+    goal = spec.goal[w]
+    task.goal_pos[w] = wp.vec3(goal[0], goal[1], 0.5 * d[2])
+    task.goal_quat[w] = yaw_quat(goal[2])
+    variant[w] = shape
+
+    write_free_joint(joint_q, object_q_start[w], wp.vec3(0.0, 0.0, 0.5 * d[2]), yaw_quat(spec.object_yaw[w]))
+    base = spec.base[w]
+    write_free_joint(joint_q, robot_q_start[w], wp.vec3(base[0], base[1], params.base_height), yaw_quat(base[2]))
     a0 = robot.arm_q_start[w]
     for j in range(NUM_ARM_JOINTS):
-        joint_q[a0 + j] = task.arm_default[j] + wp.randf(rng, -params.arm_joint_noise, params.arm_joint_noise)
+        joint_q[a0 + j] = spec.arm_q[w, j]
+        task.arm_command[w, j] = spec.arm_q[w, j]
     joint_q[a0 + NUM_ARM_JOINTS] = params.frozen_joint_value
-    base_mass = base_mass_nominal + uniform(rng, params.base_mass_offset)
+    base_mass = base_mass_nominal + spec.base_mass_offset[w]
     body_mass[robot.base_body[w]] = base_mass
     body_inv_mass[robot.base_body[w]] = 1.0 / base_mass
 
-    # Task buffers.
     for i in range(NUM_ACTIONS):
         task.actions[w, i] = 0.0
         task.last_actions[w, i] = 0.0
     for i in range(NUM_BASE_COMMANDS):
         task.base_command[w, i] = base_default[i]
         task.base_command_filtered[w, i] = base_default[i]
-    for j in range(NUM_ARM_JOINTS):
-        task.arm_command[w, j] = joint_q[a0 + j]
     for c in range(CONTACT_COLUMNS):
         task.contacts[w, c] = 0
     task.episode_step[w] = 0
     task.reach_reward_held[w] = 0.0
-    task.next_push_step[w] = int(uniform(rng, params.push_interval_steps))
+    task.next_push_step[w] = spec.first_push_step[w]
 
 
 @wp.kernel

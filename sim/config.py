@@ -241,6 +241,7 @@ class SimConfig:
     substeps: int = 4  # per 20 ms control step
     xpbd_iterations: int = 4
     ground_friction: float = 0.4  # the floor's own coefficient; object mu = 2 * combined - ground
+    contacts_per_world: int = 48  # contact buffer budget; a resting box uses ~8, a push ~12
 
     def validate(self, prefix: str = "sim") -> None:
         if self.solver not in SOLVERS:
@@ -250,6 +251,8 @@ class SimConfig:
         if self.xpbd_iterations < 1:
             raise ConfigError(f"{prefix}.xpbd_iterations must be >= 1, got {self.xpbd_iterations!r}")
         _check_positive(f"{prefix}.ground_friction", self.ground_friction, allow_zero=True)
+        if self.contacts_per_world < 8:
+            raise ConfigError(f"{prefix}.contacts_per_world must be >= 8, got {self.contacts_per_world!r}")
 
 
 @dataclass

@@ -30,6 +30,7 @@ from dynpush.kernels import (
 from dynpush.kernels.views import CONTACT_COLUMNS, NUM_ACTIONS, NUM_ARM_JOINTS, NUM_CRITIC_OBS, NUM_POLICY_OBS, PushTask, RobotView
 
 from .config import PushEnvConfig
+from .episode import EpisodeSpec
 from .scene import Scene, build_scene
 
 wp.config.enable_backward = False  # halves Newton's cold kernel compile (NEWTON_NOTES.md)
@@ -81,7 +82,11 @@ class PushEnv(VecEnv):
         self.state_0 = model.state()
         self.state_1 = model.state()
         self.control = model.control()
-        self.collision = newton.CollisionPipeline(model)
+        # Contact buffers sized per world: XPBD's contact kernels run over the whole buffer, so
+        # Newton's default (hundreds per world for this scene) cost 5x in solver time.
+        self.collision = newton.CollisionPipeline(
+            model, rigid_contact_max=self.cfg.sim.contacts_per_world * self.num_envs
+        )
         self.contacts = self.collision.contacts()
 
     def _make_buffers(self) -> None:
@@ -131,6 +136,15 @@ class PushEnv(VecEnv):
         self.episode_toppled = zeros(n, int)
         self.constraints = zeros((n, constraints_k.NUM_CONSTRAINTS))
         self.variant = zeros(n, int)
+        spec = sampling.EpisodeSpec()
+        for name in ("shape", "first_push_step"):
+            setattr(spec, name, zeros(n, int))
+        for name in ("mass", "friction", "object_yaw", "base_mass_offset"):
+            setattr(spec, name, zeros(n))
+        for name in ("dims", "com_o", "reach_target_o", "goal", "base"):
+            setattr(spec, name, zeros(n, wp.vec3))
+        spec.arm_q = zeros((n, NUM_ARM_JOINTS))
+        self.spec = spec
         self.articulation_mask = wp.zeros(model.articulation_count, dtype=bool)
         self.shape_role = i32(scene.shape_role)
         self.shape_self_column = i32(scene.shape_self_column)
@@ -310,12 +324,17 @@ class PushEnv(VecEnv):
                                                            self.policy_obs, self.critic_obs])
 
     def _reset_flagged(self) -> None:
-        """Draws new episodes for worlds with ``reset_flags != 0`` (inside the captured step)."""
-        model, view, cfg = self.scene.model, self.views[0], self.cfg
-        self._launch(sampling.sample_episodes, [
-            self.reset_flags, cfg.seed, self.sampling_params, view, self.task, self.base_default,
+        """Draws and starts new episodes for worlds with ``reset_flags != 0`` (inside the captured step)."""
+        self._launch(sampling.sample_episodes, [self.reset_flags, self.cfg.seed, self.sampling_params, self.task, self.spec])
+        self._start_flagged()
+
+    def _start_flagged(self) -> None:
+        """Applies ``self.spec`` to the flagged worlds: task buffers, object variant and properties, poses."""
+        model, view = self.scene.model, self.views[0]
+        self._launch(sampling.start_episodes, [
+            self.reset_flags, self.spec, self.sampling_params, view, self.task, self.base_default,
             self.scene.robot.base_mass, self.robot_q_start, self.object_q_start, self.state_0.joint_q,
-            self.state_0.joint_qd, model.body_mass, model.body_inv_mass, self.variant])
+            model.body_mass, model.body_inv_mass, self.variant])
         flags = model.select_body_variants(self.variant, bodies=self.object_body)
         self._launch(sampling.apply_object_properties, [
             self.reset_flags, self.task, self.object_body, self.object_shape, model.shape_scale,
@@ -329,16 +348,42 @@ class PushEnv(VecEnv):
         newton.eval_fk(model, self.state_0.joint_q, self.state_0.joint_qd, self.state_0, mask=self.articulation_mask)
         self.solver.notify_model_changed(flags)
 
+    def set_episodes(self, episodes: dict[int, EpisodeSpec]) -> TensorDict:
+        """Starts user-chosen episodes (evaluation scenarios, tests) in the given worlds, now.
+
+        Other worlds continue untouched. Returns the observations of all worlds.
+        """
+        for w in episodes:
+            if not 0 <= w < self.num_envs:
+                raise IndexError(f"world index must lie in [0, {self.num_envs}), got {w}")
+        with wp.ScopedDevice(self.wp_device):
+            arrays = {name: getattr(self.spec, name).numpy() for name in EpisodeSpec.ARRAY_FIELDS}
+            flags = np.zeros(self.num_envs, dtype=np.int32)
+            for w, episode in episodes.items():
+                episode.validate(arm_default=self.scene.robot.arm_default[:NUM_ARM_JOINTS])
+                for name, value in episode.as_arrays(self.scene.robot.arm_default[:NUM_ARM_JOINTS]).items():
+                    arrays[name][w] = value
+                flags[w] = 1
+            for name, value in arrays.items():
+                getattr(self.spec, name).assign(value)
+            self.reset_flags.assign(flags)
+            self._start_flagged()
+            self._sync_targets_and_observe()
+        return self.get_observations()
+
+    def _sync_targets_and_observe(self) -> None:
+        self.control.joint_target_q.assign(self.state_0.joint_q)
+        self._launch(observations_k.compute_observations, [self.views[0], self.task, self.noise_scale,
+                                                           int(self.cfg.noise.enabled), self.cfg.seed,
+                                                           self.policy_obs, self.critic_obs])
+
     # ------------------------------------------------------------------ VecEnv
     def reset(self) -> TensorDict:
         """Resets every world (outside the graph) and returns the first observations."""
         with wp.ScopedDevice(self.wp_device):
             self.reset_flags.fill_(1)
             self._reset_flagged()
-            self.control.joint_target_q.assign(self.state_0.joint_q)
-            self._launch(observations_k.compute_observations, [self.views[0], self.task, self.noise_scale,
-                                                               int(self.cfg.noise.enabled), self.cfg.seed,
-                                                               self.policy_obs, self.critic_obs])
+            self._sync_targets_and_observe()
         return self.get_observations()
 
     def get_observations(self) -> TensorDict:

@@ -1,0 +1,43 @@
+"""USD assets of dynpush: the robot, the two push objects and the ground.
+
+The files are written by :mod:`dynpush.assets_usd.generate` (run
+``python -m dynpush.assets_usd.generate``); see its module docstring for every number,
+its source and the conventions.  Importing this package does not import ``pxr``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+_HERE = Path(__file__).resolve().parent
+
+ROBOT_USD: Path = _HERE / "robot.usda"
+CUBOID_USD: Path = _HERE / "object_cuboid.usda"
+CYLINDER_USD: Path = _HERE / "object_cylinder.usda"
+GROUND_USD: Path = _HERE / "ground.usda"
+
+#: Revolute arm joints, base to tip (prim names under ``/Robot/joints``).
+ARM_JOINT_NAMES: tuple[str, ...] = ("SH_ROT", "SH_FLE", "EL_FLE", "FA_ROT", "WRIST_1", "WRIST_2")
+#: Arm rigid bodies, base to tip (prim names under ``/Robot``); link i is moved by joint i.
+ARM_LINK_NAMES: tuple[str, ...] = ("shoulder", "upper_arm", "elbow", "forearm", "wrist_1", "wrist_2")
+#: Leg collision shapes on the ``base`` body (prim names under ``/Robot/base``).
+LEG_SHAPE_NAMES: tuple[str, ...] = (
+    "LF_thigh",
+    "LF_shank",
+    "RF_thigh",
+    "RF_shank",
+    "LH_thigh",
+    "LH_shank",
+    "RH_thigh",
+    "RH_shank",
+)
+
+__all__ = [
+    "ARM_JOINT_NAMES",
+    "ARM_LINK_NAMES",
+    "CUBOID_USD",
+    "CYLINDER_USD",
+    "GROUND_USD",
+    "LEG_SHAPE_NAMES",
+    "ROBOT_USD",
+]

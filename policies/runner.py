@@ -2,26 +2,34 @@
 
 rsl_rl's learning loop is used unchanged. :class:`~dynpush.policies.cat_ppo.CaTPPO` reads ``extras["constraints"]``
 in its ``process_env_step`` and adds its statistics to the extras that rsl_rl's logger averages per iteration
-(``CaT/mean_delta``, ``CaT/violation_rate/<group>``). This runner only builds CaT-PPO and, at the start of every
-iteration, applies the ``p_max`` curricula and the reach-reward weight (:mod:`dynpush.policies.schedules`).
+(``CaT/mean_delta``, ``CaT/violation_rate/<group>``). This runner builds CaT-PPO and, at the start of every
+iteration, applies the ``p_max`` curricula and the reach-reward weight (:mod:`dynpush.policies.schedules`) and keeps a
+snapshot of the training state, so that an interrupted run saves the last iteration boundary. Checkpoints also hold
+the environment's state and the RNG state, so a resumed run continues exactly as an uninterrupted one.
 """
 
 from __future__ import annotations
 
+import copy
+import os
+
+import torch
 from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner
 
 from dynpush.policies.cat_ppo import CaTPPO
+from dynpush.policies.progress import ProgressLogger
 from dynpush.policies.schedules import ScheduleConfig, p_max_at, reach_weight_at
 
 
 class CaTOnPolicyRunner(OnPolicyRunner):
-    """On-policy runner for CaT-PPO with per-iteration schedules.
+    """On-policy runner for CaT-PPO with per-iteration schedules and exact resume.
 
     The environment must provide ``env.constraint_groups`` (``(name, dim)`` in column order), ``extras["constraints"]``
-    every step, and ``env.set_reward_weight(name, weight)``. ``train_cfg`` is rsl_rl's runner config; its optional
-    ``"schedule"`` entry holds :class:`~dynpush.policies.schedules.ScheduleConfig` fields as a nested dict, and
-    ``train_cfg["algorithm"]["class_name"]`` defaults to :class:`CaTPPO`.
+    every step, ``env.set_reward_weight(name, weight)`` and ``env.state_dict()`` / ``env.load_state_dict()``.
+    ``train_cfg`` is rsl_rl's runner config; its optional ``"schedule"`` entry holds
+    :class:`~dynpush.policies.schedules.ScheduleConfig` fields as a nested dict, and ``train_cfg["algorithm"]["class_name"]``
+    defaults to :class:`CaTPPO`.
     """
 
     alg: CaTPPO
@@ -34,16 +42,69 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         if not isinstance(self.alg, CaTPPO):
             raise TypeError(f"CaTOnPolicyRunner needs a CaTPPO algorithm, got {type(self.alg).__name__}.")
         self.schedule_cfg = ScheduleConfig.from_dict(train_cfg.get("schedule", {}))
+        self.logger.__class__ = ProgressLogger  # rsl_rl's logger plus a progress bar and a one-line summary
+        self._snapshot: dict | None = None
 
-    def learn(self, num_learning_iterations: int, init_at_random_ep_len: bool = False) -> None:
-        """Run rsl_rl's learning loop; the schedules follow iterations ``[start, start + num_learning_iterations)``."""
+    def learn(
+        self, num_learning_iterations: int, init_at_random_ep_len: bool = False, total_iterations: int | None = None
+    ) -> None:
+        """Run rsl_rl's learning loop for ``num_learning_iterations`` from the current iteration.
+
+        ``total_iterations`` is the length of the whole run the schedules refer to (default: this call's end).
+        """
         start_it = self.current_learning_iteration
-        total_it = start_it + num_learning_iterations
-        iterations = iter(range(start_it, total_it))
-        self.alg.on_rollout_start = lambda: self.apply_schedules(next(iterations), total_it)
+        total_it = total_iterations or start_it + num_learning_iterations
+        iterations = iter(range(start_it, start_it + num_learning_iterations))
+
+        def on_rollout_start() -> None:
+            it = next(iterations)
+            self._snapshot = {"iteration": it, **copy.deepcopy(self._training_state(next_iteration=it))}
+            self.apply_schedules(it, total_it)
+
+        self.alg.on_rollout_start = on_rollout_start
         super().learn(num_learning_iterations, init_at_random_ep_len)
 
     def apply_schedules(self, iteration: int, total_iterations: int) -> None:
         """Set ``p_max`` and the reach-reward weight for ``iteration`` of a run of ``total_iterations``."""
         self.alg.set_p_max(p_max_at(iteration, total_iterations, self.schedule_cfg, self.env.constraint_groups))
         self.env.set_reward_weight("reach", reach_weight_at(iteration, total_iterations, self.schedule_cfg))
+
+    def _training_state(self, next_iteration: int) -> dict:
+        saved = self.alg.save()
+        saved["iter"] = next_iteration
+        saved["infos"] = {"env_state": self.env.state_dict(), "torch_rng": torch.get_rng_state()}
+        return saved
+
+    def save(self, path: str, infos: dict | None = None) -> None:
+        """Save models, optimiser, CaT state, environment state and RNG; ``iter`` is the next iteration to run."""
+        saved = self._training_state(next_iteration=self.current_learning_iteration + 1)
+        saved["infos"].update(infos or {})
+        torch.save(saved, path)
+        self.logger.save_model(path, self.current_learning_iteration)
+
+    def save_interrupted(self) -> str:
+        """Save the snapshot of the last iteration boundary (the interrupted iteration is re-run on resume)."""
+        if self._snapshot is None:
+            raise RuntimeError("nothing to save: training had not started")
+        path = os.path.join(self.logger.log_dir or ".", f"model_{self._snapshot['iteration']}.pt")
+        state = {k: v for k, v in self._snapshot.items() if k != "iteration"}
+        torch.save(state, path)
+        return path
+
+    def load(self, path: str, load_cfg: dict | None = None, strict: bool = True, map_location: str | None = None) -> dict:
+        """Load a checkpoint; restores the environment and the RNG too when the checkpoint has them."""
+        try:
+            loaded = torch.load(path, weights_only=False, map_location=map_location)
+        except Exception as error:  # a truncated or foreign file
+            raise RuntimeError(f"cannot read checkpoint {path}: {error}") from error
+        for key in ("actor_state_dict", "critic_state_dict", "iter"):
+            if key not in loaded:
+                raise RuntimeError(f"checkpoint {path} is not a dynpush training checkpoint (missing {key!r})")
+        if self.alg.load(loaded, load_cfg, strict):
+            self.current_learning_iteration = loaded["iter"]
+        infos = loaded.get("infos") or {}
+        if "env_state" in infos:
+            self.env.load_state_dict(infos["env_state"])
+        if "torch_rng" in infos:
+            torch.set_rng_state(infos["torch_rng"])
+        return infos

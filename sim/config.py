@@ -84,15 +84,18 @@ class RandomizationConfig:
 
 @dataclass
 class ObservationNoiseConfig:
-    """Half-widths of the actor's additive uniform noise (paper Table "Observations")."""
+    """Half-widths of the actor's additive uniform noise (paper Table "Observations").
+
+    Field names are the observation terms of ``dynpush.kernels.observations.POLICY_TERMS``.
+    """
 
     ee_to_object_b: float = 0.02
     object_rotation_b: float = 0.01
     arm_joint_position: float = 0.01
-    base_linear_velocity: float = 0.01
-    base_angular_velocity: float = 0.20
+    base_linear_velocity_b: float = 0.01
+    base_angular_velocity_b: float = 0.20
     arm_joint_velocity: float = 0.50
-    projected_gravity: float = 0.05
+    projected_gravity_b: float = 0.05
     object_to_goal_b: float = 0.02
     goal_rotation_o: float = 0.01
     enabled: bool = True

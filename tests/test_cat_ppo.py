@@ -36,6 +36,13 @@ class FakePushEnv(VecEnv):
     def _randn(self, *shape):
         return torch.randn(*shape, generator=self.generator)
 
+    def state_dict(self):
+        return {"generator": self.generator.get_state(), "episode_length_buf": self.episode_length_buf.clone()}
+
+    def load_state_dict(self, state):
+        self.generator.set_state(state["generator"])
+        self.episode_length_buf.copy_(state["episode_length_buf"])
+
     def get_observations(self):
         n = self.num_envs
         return TensorDict({"policy": self._randn(n, 54), "critic": self._randn(n, 73)}, batch_size=[n])
@@ -237,13 +244,13 @@ def test_runner_learns_two_iterations(tmp_path, capsys):
     assert env.reward_weights == [("reach", 1.25), ("reach", 1.25 / 4)]  # 2-iteration run: switch at 0.15
     torch.testing.assert_close(runner.alg.p_max, p_max_at(1, 2))
     out = capsys.readouterr().out
-    assert "CaT/mean_delta" in out and "CaT/violation_rate/collision" in out
+    assert "| delta " in out and " coll " in out  # the runner's one-line summary of the CaT statistics
     assert os.path.isfile(tmp_path / "model_1.pt")
 
     resumed = CaTOnPolicyRunner(FakePushEnv(), copy.deepcopy(cfg), device="cpu")
     resumed.load(str(tmp_path / "model_1.pt"))
     assert torch.equal(resumed.alg.c_max, runner.alg.c_max)
-    assert resumed.current_learning_iteration == 1
+    assert resumed.current_learning_iteration == 2  # checkpoints store the next iteration to run
 
 
 def test_runner_rejects_plain_ppo():

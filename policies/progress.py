@@ -1,0 +1,53 @@
+"""rsl_rl's logger with a progress bar and a one-line summary per iteration instead of its console block."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+
+import torch
+from rsl_rl.utils.logger import Logger
+from tqdm import tqdm
+
+GROUP_ABBREVIATIONS = {
+    "base_command": "base", "arm_command": "arm", "arm_action_rate": "rate", "arm_joint_position": "q",
+    "arm_joint_velocity": "qd", "arm_joint_torque": "tau", "leg_joint_torque": "leg", "collision": "coll",
+    "object_balance": "bal",
+}
+
+
+def iteration_summary(ep_extras: list[dict]) -> dict[str, float]:
+    """Means over an iteration of the step extras (tensors are concatenated, so episodes weigh equally)."""
+    summary: dict[str, float] = {}
+    for key in dict.fromkeys(k for step in ep_extras for k in step):
+        values = [torch.as_tensor(step[key], dtype=torch.float).reshape(-1) for step in ep_extras if key in step]
+        summary[key] = float(torch.cat(values).mean())
+    return summary
+
+
+class ProgressLogger(Logger):
+    """Writes tensorboard exactly as rsl_rl does, and prints one line per iteration under a tqdm bar."""
+
+    bar: tqdm | None = None
+
+    def log(self, it: int, start_it: int, total_it: int, collect_time: float, learn_time: float, **kwargs) -> None:
+        if self.writer is None:  # non-zero ranks of a distributed run
+            super().log(it, start_it, total_it, collect_time, learn_time, **kwargs)
+            return
+        summary = iteration_summary(self.ep_extras)
+        with contextlib.redirect_stdout(io.StringIO()):
+            super().log(it, start_it, total_it, collect_time, learn_time, **kwargs)
+        if self.bar is None:
+            self.bar = tqdm(total=total_it, initial=start_it, unit="it", dynamic_ncols=True)
+        steps = self.cfg["num_steps_per_env"] * self.num_envs * self.gpu_world_size
+        violations = " ".join(
+            f"{abbr} {summary.get(f'CaT/violation_rate/{name}', float('nan')):.3f}"
+            for name, abbr in GROUP_ABBREVIATIONS.items()
+        )
+        self.bar.write(
+            f"it {it:5d} | {steps / collect_time:7.0f} world-steps/s | sim {collect_time:5.2f}s update {learn_time:5.2f}s"
+            f" | success {summary.get('/episode/success', float('nan')):.3f}"
+            f" toppled {summary.get('/episode/toppled', float('nan')):.3f}"
+            f" | delta {summary.get('CaT/mean_delta', float('nan')):.4f} | violated: {violations}"
+        )
+        self.bar.update(1)

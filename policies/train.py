@@ -1,0 +1,192 @@
+"""Training configuration, presets and the ``dynpush train`` job.
+
+The paper gives no PPO hyper-parameters; the defaults are rsl_rl's own (those of legged_gym /
+Isaac Lab locomotion tasks). The ``paper`` preset is the paper's scale (4096 environments, 20000
+iterations, III-A) on a GPU; the ``cpu`` preset is sized for a 2-core laptop-class machine.
+"""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import json
+import signal
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+
+from dynpush.sim.config import ConfigError, PushEnvConfig
+
+from .runner import CaTOnPolicyRunner
+
+PRESETS = ("cpu", "paper")
+
+
+@dataclass
+class PPOConfig:
+    """rsl_rl PPO arguments (rsl_rl defaults; the paper gives none)."""
+
+    num_learning_epochs: int = 5
+    num_mini_batches: int = 4
+    clip_param: float = 0.2
+    gamma: float = 0.99
+    lam: float = 0.95
+    value_loss_coef: float = 1.0
+    entropy_coef: float = 0.005
+    learning_rate: float = 1.0e-3
+    max_grad_norm: float = 1.0
+    schedule: str = "adaptive"
+    desired_kl: float = 0.01
+
+
+@dataclass
+class NetworkConfig:
+    """Asymmetric actor-critic MLPs (paper III-C) with ELU and empirical observation normalisation."""
+
+    actor_hidden: tuple[int, ...] = (256, 128, 64)
+    critic_hidden: tuple[int, ...] = (256, 128, 64)
+    init_noise_std: float = 1.0
+
+
+@dataclass
+class TrainConfig:
+    preset: str = "cpu"
+    env: PushEnvConfig = field(default_factory=PushEnvConfig)
+    iterations: int = 1500
+    num_steps_per_env: int = 24
+    save_interval: int = 50
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    network: NetworkConfig = field(default_factory=NetworkConfig)
+    # Schedules (p_max curricula, w2) scale with the run length unless this is False (policies/schedules.py).
+    scale_schedules_with_run_length: bool = True
+
+    @staticmethod
+    def preset_config(name: str) -> TrainConfig:
+        if name == "paper":  # III-A: 4096 environments, 20000 iterations
+            return TrainConfig(preset=name, env=PushEnvConfig(num_envs=4096, device="cuda:0"), iterations=20000)
+        if name == "cpu":
+            return TrainConfig(preset=name, env=PushEnvConfig(num_envs=512, device="cpu"), iterations=1500)
+        raise ConfigError(f"preset must be one of {PRESETS}, got {name!r}")
+
+    def validate(self) -> TrainConfig:
+        self.env.validate()
+        for name in ("iterations", "num_steps_per_env", "save_interval"):
+            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
+                raise ConfigError(f"{name} must be an integer >= 1, got {getattr(self, name)!r}")
+        if self.ppo.schedule not in ("adaptive", "fixed"):
+            raise ConfigError(f"ppo.schedule must be 'adaptive' or 'fixed', got {self.ppo.schedule!r}")
+        return self
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @staticmethod
+    def from_dict(data: dict) -> TrainConfig:
+        return _from_dict(TrainConfig, data)
+
+    def runner_cfg(self) -> dict:
+        """The rsl_rl runner configuration."""
+        mlp = {"class_name": "MLPModel", "activation": "elu", "obs_normalization": True}
+        return {
+            "num_steps_per_env": self.num_steps_per_env,
+            "save_interval": self.save_interval,
+            "obs_groups": {"actor": ["policy"], "critic": ["critic"]},
+            "algorithm": dataclasses.asdict(self.ppo),
+            "actor": {**mlp, "hidden_dims": list(self.network.actor_hidden),
+                      "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": self.network.init_noise_std}},
+            "critic": {**mlp, "hidden_dims": list(self.network.critic_hidden)},
+            "schedule": {"scale_with_run_length": self.scale_schedules_with_run_length},
+            "logger": "tensorboard",
+            "check_for_nan": True,
+        }
+
+
+def _from_dict(cls, data: dict):
+    kwargs = {}
+    names = {f.name: f for f in dataclasses.fields(cls)}
+    for key, value in data.items():
+        if key not in names:
+            raise ConfigError(f"unknown config field {cls.__name__}.{key}; allowed: {sorted(names)}")
+        default = getattr(cls(), key)
+        if dataclasses.is_dataclass(default):
+            value = _from_dict(type(default), value)
+        elif isinstance(default, tuple):
+            value = tuple(value)
+        kwargs[key] = value
+    return cls(**kwargs)
+
+
+def apply_overrides(cfg: TrainConfig, overrides: list[str]) -> TrainConfig:
+    """Applies ``dotted.field=value`` overrides (values parsed as Python literals, else strings)."""
+    for item in overrides:
+        if "=" not in item:
+            raise ConfigError(f"override must look like field.path=value, got {item!r}")
+        path, text = item.split("=", 1)
+        target = cfg
+        keys = path.split(".")
+        for key in keys[:-1]:
+            if not hasattr(target, key) or not dataclasses.is_dataclass(getattr(target, key)):
+                raise ConfigError(f"unknown config section {path!r}")
+            target = getattr(target, key)
+        leaf = keys[-1]
+        if not dataclasses.is_dataclass(target) or leaf not in {f.name for f in dataclasses.fields(target)}:
+            raise ConfigError(f"unknown config field {path!r}")
+        try:
+            value = ast.literal_eval(text)
+        except (ValueError, SyntaxError):
+            value = text
+        current = getattr(target, leaf)
+        if isinstance(current, float) and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if isinstance(current, tuple) and isinstance(value, list):
+            value = tuple(value)
+        if type(value) is not type(current):
+            raise ConfigError(f"{path} must be of type {type(current).__name__}, got {text!r}")
+        setattr(target, leaf, value)
+    return cfg
+
+
+def latest_checkpoint(run_dir: Path) -> Path | None:
+    checkpoints = sorted(run_dir.glob("model_*.pt"), key=lambda p: int(p.stem.split("_")[1]))
+    return checkpoints[-1] if checkpoints else None
+
+
+def train(cfg: TrainConfig, run_dir: Path, resume: bool = False) -> CaTOnPolicyRunner:
+    """Trains (or resumes) a push policy into ``run_dir``; saves on Ctrl-C / SIGTERM."""
+    from dynpush.sim.push_env import PushEnv
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    config_path = run_dir / "config.json"
+    if resume:
+        if not config_path.exists():
+            raise FileNotFoundError(f"--resume: no {config_path}; start the run without --resume first")
+        cfg = TrainConfig.from_dict(json.loads(config_path.read_text()))
+    cfg.validate()
+    config_path.write_text(json.dumps(cfg.to_dict(), indent=2))
+
+    torch.manual_seed(cfg.env.seed)
+    env = PushEnv(cfg.env)
+    runner = CaTOnPolicyRunner(env, cfg.runner_cfg(), log_dir=str(run_dir), device=cfg.env.device)
+    if resume:
+        checkpoint = latest_checkpoint(run_dir)
+        if checkpoint is None:
+            raise FileNotFoundError(f"--resume: no model_*.pt in {run_dir}")
+        runner.load(str(checkpoint))
+    remaining = cfg.iterations - runner.current_learning_iteration
+    if remaining <= 0:
+        print(f"{run_dir}: all {cfg.iterations} iterations done")
+        return runner
+
+    def on_sigterm(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, on_sigterm)
+    try:
+        runner.learn(remaining, total_iterations=cfg.iterations)
+    except KeyboardInterrupt:
+        path = runner.save_interrupted()
+        print(f"\ninterrupted: saved {path}; continue with --resume")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    return runner

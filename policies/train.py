@@ -64,9 +64,11 @@ class TrainConfig:
     @staticmethod
     def preset_config(name: str) -> TrainConfig:
         if name == "paper":  # III-A: 4096 environments, 20000 iterations
-            return TrainConfig(preset=name, env=PushEnvConfig(num_envs=4096, device="cuda:0"), iterations=20000)
+            env = PushEnvConfig(num_envs=4096, device="cuda:0", randomize_first_episode_length=True)
+            return TrainConfig(preset=name, env=env, iterations=20000)
         if name == "cpu":
-            return TrainConfig(preset=name, env=PushEnvConfig(num_envs=512, device="cpu"), iterations=1500)
+            env = PushEnvConfig(num_envs=512, device="cpu", randomize_first_episode_length=True)
+            return TrainConfig(preset=name, env=env, iterations=3000)
         raise ConfigError(f"preset must be one of {PRESETS}, got {name!r}")
 
     def validate(self) -> TrainConfig:

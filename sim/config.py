@@ -267,6 +267,7 @@ class PushEnvConfig:
     seed: int = 0
     control_dt: float = 0.02  # III: push and locomotion policies at 50 Hz
     episode_length_s: float = 20.0  # III-B: 20 s episodes
+    randomize_first_episode_length: bool = False  # training: desynchronize the first episodes' ends
     sim: SimConfig = field(default_factory=SimConfig)
     sampling: SamplingConfig = field(default_factory=SamplingConfig)
     randomization: RandomizationConfig = field(default_factory=RandomizationConfig)

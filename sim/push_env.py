@@ -63,7 +63,7 @@ class PushEnv(VecEnv):
             self._make_solver()
             self._make_buffers()
             self._make_params()
-            self.reset()
+            self.reset(randomize_episode_step=cfg.randomize_first_episode_length)
             self._graph = None
             if self.wp_device.is_cpu or self.wp_device.is_cuda:
                 with wp.ScopedCapture() as capture:
@@ -378,11 +378,19 @@ class PushEnv(VecEnv):
                                                            self.policy_obs, self.critic_obs])
 
     # ------------------------------------------------------------------ VecEnv
-    def reset(self) -> TensorDict:
-        """Resets every world (outside the graph) and returns the first observations."""
+    def reset(self, randomize_episode_step: bool = False) -> TensorDict:
+        """Resets every world (outside the graph) and returns the first observations.
+
+        With ``randomize_episode_step`` the episode counters start uniformly in [0, episode length).
+        """
         with wp.ScopedDevice(self.wp_device):
             self.reset_flags.fill_(1)
             self._reset_flagged()
+            if randomize_episode_step:
+                # Spread the first episodes' ends over one episode length so that resets (and episode
+                # statistics) do not come in synchronized waves.
+                rng = np.random.default_rng(self.cfg.seed)
+                self.task.episode_step.assign(rng.integers(0, self.max_episode_length, self.num_envs, dtype=np.int32))
             self._sync_targets_and_observe()
         return self.get_observations()
 

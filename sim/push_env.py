@@ -8,7 +8,9 @@ torch tensors handed to the trainer are zero-copy views of the Warp buffers.
 
 from __future__ import annotations
 
+import contextlib
 import math
+from collections.abc import Callable
 
 import newton
 import numpy as np
@@ -279,6 +281,18 @@ class PushEnv(VecEnv):
         self.noise_scale = f32(scales)
 
     # ------------------------------------------------------------------ the step
+    stage_timer: Callable[[str], contextlib.AbstractContextManager] | None = None
+    """Benchmarks set this to time the stages of an uncaptured step (``physics``, ``collision``, ``kernels``)."""
+
+    def _stage(self, name: str) -> contextlib.AbstractContextManager:
+        return self.stage_timer(name) if self.stage_timer else contextlib.nullcontext()
+
+    def step_uncaptured(self, actions: torch.Tensor) -> None:
+        """One control step launched kernel by kernel (same result as :meth:`step`); for profiling."""
+        self.actions_t.copy_(actions)
+        with wp.ScopedDevice(self.wp_device):
+            self._step_kernels()
+
     def _launch(self, kernel, inputs):
         wp.launch(kernel, dim=self.num_envs, inputs=inputs, device=self.wp_device)
 
@@ -290,38 +304,45 @@ class PushEnv(VecEnv):
         for sub in range(cfg.sim.substeps):
             state_in, state_out = states[sub % 2], states[(sub + 1) % 2]
             view = self.views[sub % 2]
-            state_in.clear_forces()
-            self._launch(base_tracking.apply_base_wrench, [view, self.task, self.tracking_params, state_in.body_f])
-            self.collision.collide(state_in, c)
-            wp.launch(
+            with self._stage("kernels"):
+                state_in.clear_forces()
+                self._launch(base_tracking.apply_base_wrench, [view, self.task, self.tracking_params, state_in.body_f])
+            with self._stage("collision"):
+                self.collision.collide(state_in, c)
+                wp.launch(
                 contacts_k.classify_contacts,
                 dim=c.rigid_contact_max,
-                inputs=[c.rigid_contact_count, c.rigid_contact_shape0, c.rigid_contact_shape1, c.rigid_contact_point0,
-                        c.rigid_contact_point1, c.rigid_contact_normal, c.rigid_contact_margin0, c.rigid_contact_margin1,
-                        model.shape_body, model.shape_world, self.shape_role, self.shape_self_column, state_in.body_q,
-                        cfg.constraints.contact_distance, self.task],
-                device=self.wp_device,
-            )
-            self.solver.step(state_in, state_out, self.control, c, dt)
+                    inputs=[c.rigid_contact_count, c.rigid_contact_shape0, c.rigid_contact_shape1, c.rigid_contact_point0,
+                            c.rigid_contact_point1, c.rigid_contact_normal, c.rigid_contact_margin0, c.rigid_contact_margin1,
+                            model.shape_body, model.shape_world, self.shape_role, self.shape_self_column, state_in.body_q,
+                            cfg.constraints.contact_distance, self.task],
+                    device=self.wp_device,
+                )
+            with self._stage("physics"):
+                self.solver.step(state_in, state_out, self.control, c, dt)
 
     def _step_kernels(self) -> None:
         """Everything of one control step; captured once into a graph."""
         cfg, model, view = self.cfg, self.scene.model, self.views[0]
         seed = cfg.seed
-        self._launch(actions_k.process_actions, [self.raw_actions, view, self.task, self.base_default, self.base_scale,
-                                                 cfg.actions.arm_scale, cfg.actions.clip, self.control.joint_target_q])
-        self.task.contacts.zero_()
+        with self._stage("kernels"):
+            self._launch(actions_k.process_actions, [self.raw_actions, view, self.task, self.base_default, self.base_scale,
+                                                     cfg.actions.arm_scale, cfg.actions.clip, self.control.joint_target_q])
+            self.task.contacts.zero_()
         self._physics_substeps()
-        self._launch(sampling.apply_pushes, [seed, self.sampling_params, view, self.task, self.state_0.body_qd])
-        newton.eval_ik(model, self.state_0, self.state_0.joint_q, self.state_0.joint_qd)
-        self._launch(rewards_k.compute_rewards, [view, self.task, self.reward_params, self.base_scale, self.reward,
-                                                 self.reward_terms, self.success])
-        self._launch(constraints_k.compute_constraints, [view, self.task, self.arm_limits, self.constraint_params, self.constraints])
-        self._launch(terminations.compute_terminations, [view, self.task, self.termination_params, self.success,
-                                                         self.reset_flags, self.time_out, self.episode_success, self.episode_toppled])
-        self._reset_flagged()
-        self._launch(observations_k.compute_observations, [view, self.task, self.noise_scale, int(cfg.noise.enabled), seed,
-                                                           self.policy_obs, self.critic_obs])
+        with self._stage("kernels"):
+            self._launch(sampling.apply_pushes, [seed, self.sampling_params, view, self.task, self.state_0.body_qd])
+            newton.eval_ik(model, self.state_0, self.state_0.joint_q, self.state_0.joint_qd)
+            self._launch(rewards_k.compute_rewards, [view, self.task, self.reward_params, self.base_scale, self.reward,
+                                                     self.reward_terms, self.success])
+            self._launch(constraints_k.compute_constraints, [view, self.task, self.arm_limits, self.constraint_params,
+                                                             self.constraints])
+            self._launch(terminations.compute_terminations, [view, self.task, self.termination_params, self.success,
+                                                             self.reset_flags, self.time_out, self.episode_success,
+                                                             self.episode_toppled])
+            self._reset_flagged()
+            self._launch(observations_k.compute_observations, [view, self.task, self.noise_scale, int(cfg.noise.enabled),
+                                                               seed, self.policy_obs, self.critic_obs])
 
     def _reset_flagged(self) -> None:
         """Draws and starts new episodes for worlds with ``reset_flags != 0`` (inside the captured step)."""

@@ -1,0 +1,114 @@
+"""PushEnv as an rsl_rl VecEnv: shapes, zero-copy views, episodes, contacts, success, bad input."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+import warp as wp
+
+from dynpush.sim.config import ConfigError, PushEnvConfig, RandomizationConfig, SimConfig
+from dynpush.sim.episode import EpisodeSpec
+from dynpush.sim.push_env import PushEnv
+
+
+def test_vecenv_interface_and_zero_copy(small_env):
+    env = small_env
+    obs = env.reset()
+    assert obs["policy"].shape == (4, 54) and obs["critic"].shape == (4, 73)
+    assert obs["policy"].dtype == torch.float32
+    obs, reward, dones, extras = env.step(torch.zeros(4, 11))
+    assert reward.shape == (4,) and dones.shape == (4,)
+    assert extras["time_outs"].dtype == torch.bool
+    assert extras["constraints"].shape == (4, sum(size for _, size in env.constraint_groups)) == (4, 62)
+    # zero-copy: the torch tensors are the Warp buffers
+    assert obs["policy"].data_ptr() == env.policy_obs.ptr
+    assert extras["constraints"].data_ptr() == env.constraints.ptr
+    # critic = noiseless policy terms + privileged terms: noise makes them differ, but only by the table's widths
+    assert (obs["policy"] - obs["critic"][:, :54]).abs().max() <= 0.5 + 1e-6
+
+
+def test_time_out_resets_and_reports(tmp_path):
+    env = PushEnv(PushEnvConfig(num_envs=2, episode_length_s=0.2, seed=3))
+    env.set_episodes({0: EpisodeSpec(base=(-2.0, 0.0, 0.0)), 1: EpisodeSpec(base=(-2.0, 0.0, 0.0))})
+    for step in range(1, 11):
+        _, _, dones, extras = env.step(torch.zeros(2, 11))
+        if step < 10:
+            assert not dones.any()
+    assert dones.all() and extras["time_outs"].all()
+    assert (env.episode_length_buf == 0).all()  # a new episode started inside the same step
+    assert extras["log"]["/episode/success"].shape == (2,)
+
+
+def test_success_gives_task_reward_two(small_env):
+    env = small_env
+    # Object already at its goal (same position and yaw): success from the first step.
+    env.set_episodes({w: EpisodeSpec(goal=(0.0, 0.0, 0.3), object_yaw=0.3, base=(-2.2, 0.0, 0.0)) for w in range(4)})
+    env.step(torch.zeros(4, 11))
+    assert (env.success_t == 1).all()
+    np.testing.assert_allclose(env.reward_terms_t[:, 0].numpy(), 2.0)  # r1 = 2 on success
+    np.testing.assert_allclose(env.reward_terms_t[:, 2].numpy(), 0.0)  # r3 = 0 on success
+    # 8 cm away and 8 deg off: still success; 12 cm away: not.
+    env.set_episodes({0: EpisodeSpec(goal=(0.08, 0.0, math.radians(8.0)), base=(-2.2, 0.0, 0.0)),
+                      1: EpisodeSpec(goal=(0.12, 0.0, 0.0), base=(-2.2, 0.0, 0.0)),
+                      2: EpisodeSpec(goal=(0.0, 0.0, math.radians(12.0)), base=(-2.2, 0.0, 0.0))})
+    env.step(torch.zeros(4, 11))
+    assert env.success_t[:3].tolist() == [1, 0, 0]
+
+
+def test_contacts_end_effector_and_base_collision(small_env):
+    env = small_env
+    up = (0.0, 0.0, 0.0, 0.0, 0.0)  # arm straight up: the base meets the object first
+    env.set_episodes({0: EpisodeSpec(base=(-1.3, 0.0, 0.0)), 1: EpisodeSpec(base=(-0.8, 0.0, 0.0), arm_q=up),
+                      2: EpisodeSpec(base=(-2.4, 0.0, 0.0)), 3: EpisodeSpec(base=(-2.4, 0.0, 0.0))})
+    actions = torch.zeros(4, 11)
+    actions[:2, 0] = 0.3  # forward at 0.3 m/s
+    arm_default = torch.tensor(env.scene.robot.arm_default[:5], dtype=torch.float32)
+    actions[1, 6:] = -arm_default / env.cfg.actions.arm_scale
+    ee_contact, collisions = np.zeros(4, bool), np.zeros((4, 18), bool)
+    for _ in range(150):
+        obs, _, _, extras = env.step(actions)
+        ee_contact |= obs["critic"][:, 54].numpy() > 0.5
+        collisions |= extras["constraints"][:, 43:61].numpy() > 0.5
+    assert ee_contact[0] and not collisions[0].any(), "the end-effector reaches the object first, without collisions"
+    assert collisions[1, :9].any(), "driving into the object with the arm up hits the base or a leg"
+    assert not ee_contact[2:].any() and not collisions[2:].any(), "robots far away touch nothing"
+
+
+def test_same_seed_same_rollout():
+    def rollout(seed):
+        env = PushEnv(PushEnvConfig(num_envs=3, seed=seed))
+        generator = torch.Generator().manual_seed(0)
+        for _ in range(20):
+            obs, reward, _, _ = env.step(torch.randn(3, 11, generator=generator))
+        return obs["policy"].clone(), reward.clone()
+
+    a, b, c = rollout(5), rollout(5), rollout(6)
+    assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1])
+    assert not torch.equal(a[0], c[0])
+
+
+@pytest.mark.parametrize(
+    "cfg, field",
+    [
+        (PushEnvConfig(device="tpu"), "device"),
+        (PushEnvConfig(num_envs=0), "num_envs"),
+        (PushEnvConfig(sim=SimConfig(solver="bullet")), "sim.solver"),
+        (PushEnvConfig(sim=SimConfig(substeps=3)), "sim.substeps"),
+        (PushEnvConfig(randomization=RandomizationConfig(mass=(10.0, 1.0))), "randomization.mass"),
+        (PushEnvConfig(randomization=RandomizationConfig(size_x=(-0.5, 0.75))), "randomization.size_x"),
+        (PushEnvConfig(randomization=RandomizationConfig(friction=(0.1, 1.0))), "sim.ground_friction"),
+    ],
+)
+def test_invalid_config_names_the_field(cfg, field):
+    with pytest.raises(ConfigError, match=field.replace(".", r"\.")):
+        cfg.validate()
+
+
+def test_invalid_episode_names_the_field(small_env):
+    with pytest.raises(ConfigError, match="episode.shape"):
+        small_env.set_episodes({0: EpisodeSpec(shape="sphere")})
+    with pytest.raises(ConfigError, match="episode.dims"):
+        small_env.set_episodes({0: EpisodeSpec(dims=(0.5, -0.5, 0.7))})
+    with pytest.raises(IndexError, match="world index"):
+        small_env.set_episodes({7: EpisodeSpec()})

@@ -51,3 +51,6 @@ class ProgressLogger(Logger):
             f" | delta {summary.get('CaT/mean_delta', float('nan')):.4f} | violated: {violations}"
         )
         self.bar.update(1)
+        if it + 1 >= total_it:
+            self.bar.close()
+            self.bar = None

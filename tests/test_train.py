@@ -1,0 +1,73 @@
+"""dynpush train: config overrides, exact resume, interrupted runs, corrupted checkpoints."""
+
+import json
+
+import pytest
+import torch
+
+from dynpush.policies.train import TrainConfig, apply_overrides, train
+from dynpush.sim.config import ConfigError
+
+
+def tiny(iterations: int) -> TrainConfig:
+    cfg = TrainConfig.preset_config("cpu")
+    return apply_overrides(cfg, ["env.num_envs=8", f"iterations={iterations}", "num_steps_per_env=6",
+                                 "save_interval=1", "network.actor_hidden=(32, 32)", "network.critic_hidden=(32, 32)"])
+
+
+def actor_parameters(runner):
+    return [p.detach().clone() for p in runner.alg.actor.parameters()]
+
+
+def test_overrides_are_typed_and_checked():
+    cfg = apply_overrides(TrainConfig.preset_config("cpu"), ["env.num_envs=64", "ppo.learning_rate=3e-4"])
+    assert cfg.env.num_envs == 64 and cfg.ppo.learning_rate == 3e-4
+    with pytest.raises(ConfigError, match="env.num_env"):
+        apply_overrides(cfg, ["env.num_env=3"])
+    with pytest.raises(ConfigError, match="iterations must be of type int"):
+        apply_overrides(cfg, ["iterations=many"])
+    with pytest.raises(ConfigError, match="preset"):
+        TrainConfig.preset_config("laptop")
+
+
+def interrupt_update_call(monkeypatch, call: int) -> None:
+    """Makes the ``call``-th PPO update raise KeyboardInterrupt (as Ctrl-C during an update would)."""
+    from dynpush.policies.cat_ppo import CaTPPO
+
+    calls = {"n": 0}
+    original = CaTPPO.update
+
+    def update(self):
+        calls["n"] += 1
+        if calls["n"] == call:
+            raise KeyboardInterrupt
+        return original(self)
+
+    monkeypatch.setattr(CaTPPO, "update", update)
+
+
+def test_interrupted_then_resumed_run_equals_the_uninterrupted_run(tmp_path, monkeypatch):
+    torch.manual_seed(0)
+    straight = train(tiny(4), tmp_path / "straight")
+
+    torch.manual_seed(0)
+    with monkeypatch.context() as patch:
+        interrupt_update_call(patch, 3)  # Ctrl-C during the update of iteration 2
+        train(tiny(4), tmp_path / "split")
+    saved = torch.load(tmp_path / "split" / "model_2.pt", weights_only=False)
+    assert saved["iter"] == 2 and "env_state" in saved["infos"]  # the boundary before iteration 2
+
+    torch.manual_seed(123)  # the checkpoint's RNG state must win over whatever the new process has
+    resumed = train(tiny(4), tmp_path / "split", resume=True)
+    assert resumed.current_learning_iteration == straight.current_learning_iteration == 3
+    for a, b in zip(actor_parameters(straight), actor_parameters(resumed)):
+        assert torch.equal(a, b)
+    assert torch.equal(straight.alg.c_max, resumed.alg.c_max)
+
+
+def test_corrupted_checkpoint_is_reported(tmp_path):
+    run = tmp_path / "run"
+    train(tiny(1), run)
+    (run / "model_1.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(RuntimeError, match="cannot read checkpoint"):
+        train(tiny(2), run, resume=True)

@@ -57,6 +57,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true", help="continue the run from its latest checkpoint")
     p.add_argument("--set", nargs="*", metavar="FIELD=VALUE", help="override config fields, e.g. env.num_envs=256 iterations=100")
     p.set_defaults(func=_train)
+
+    # Commands of the evaluation/export side and of the deployment runtime register themselves.
+    from dynpush.policies.commands import register as register_policy_commands
+    from dynpush.runtime.commands import register as register_runtime_commands
+
+    register_policy_commands(sub)
+    register_runtime_commands(sub)
     return parser
 
 

@@ -15,24 +15,15 @@ origin (the centroid), expressed in the base frame.
 
 import warp as wp
 
+from dynpush.runtime.observation import POLICY_OBSERVATION_LAYOUT
+
 from .frames import next_rng
 from .views import EE_CONTACT, NUM_ACTIONS, NUM_ARM_JOINTS, NUM_POLICY_OBS, PushTask, RobotView
 
 wp.set_module_options({"enable_backward": False})
 
-# (name, size) of each actor term, in order; the noise half-widths follow the same order.
-POLICY_TERMS = (
-    ("ee_to_object_b", 3),
-    ("object_rotation_b", 9),
-    ("arm_joint_position", 5),
-    ("base_linear_velocity_b", 3),
-    ("base_angular_velocity_b", 3),
-    ("arm_joint_velocity", 5),
-    ("projected_gravity_b", 3),
-    ("object_to_goal_b", 3),
-    ("goal_rotation_o", 9),
-    ("last_actions", 11),
-)
+# The actor layout is defined once, by the runtime's numpy builder (no heavy imports there).
+POLICY_TERMS = POLICY_OBSERVATION_LAYOUT
 PRIVILEGED_TERMS = (
     ("ee_object_contact", 1),
     ("object_com_b", 3),

@@ -136,8 +136,10 @@ def worlds():
     return random_worlds(np.random.default_rng(21), 4096)
 
 
-def test_layout_matches_kernel():
-    assert POLICY_OBSERVATION_LAYOUT == POLICY_TERMS
+def test_layout_is_the_papers_table():
+    # Paper Table "Observations": sizes of o_t in order; the kernel uses the runtime's layout object.
+    assert [size for _, size in POLICY_OBSERVATION_LAYOUT] == [3, 9, 5, 3, 3, 5, 3, 3, 9, 11]
+    assert POLICY_TERMS is POLICY_OBSERVATION_LAYOUT
     assert POLICY_OBSERVATION_SIZE == NUM_POLICY_OBS == 54
     assert NUM_POLICY_OBS + sum(size for _, size in PRIVILEGED_TERMS) == NUM_CRITIC_OBS == 73
 

@@ -15,18 +15,7 @@ import torch
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-CONSTRAINT_GROUPS: tuple[tuple[str, int], ...] = (
-    ("base_command", 6),
-    ("arm_command", 5),
-    ("arm_action_rate", 5),
-    ("arm_joint_position", 5),
-    ("arm_joint_velocity", 5),
-    ("arm_joint_torque", 5),
-    ("leg_joint_torque", 12),
-    ("collision", 18),
-    ("object_balance", 1),
-)
-"""Constraint groups ``(name, dim)`` in column order of ``extras["constraints"]`` (Table "Rewards and constraints")."""
+from dynpush.kernels.constraints import CONSTRAINT_GROUPS
 
 
 def _paper_p_max() -> dict[str, tuple[float, float]]:

@@ -18,7 +18,10 @@ import torch
 
 from dynpush.sim.config import ConfigError, PushEnvConfig
 
+from dynpush.kernels.constraints import CONSTRAINT_GROUPS
+
 from .runner import CaTOnPolicyRunner
+from .schedules import ConstraintCurriculumConfig
 
 PRESETS = ("cpu", "paper")
 
@@ -60,6 +63,8 @@ class TrainConfig:
     network: NetworkConfig = field(default_factory=NetworkConfig)
     # Schedules (p_max curricula, w2) scale with the run length unless this is False (policies/schedules.py).
     scale_schedules_with_run_length: bool = True
+    # Constraint groups whose p_max is held at 0 (Table I ablation: "w/o object balance constraint").
+    disabled_constraint_groups: tuple[str, ...] = ()
 
     @staticmethod
     def preset_config(name: str) -> TrainConfig:
@@ -76,6 +81,9 @@ class TrainConfig:
         for name in ("iterations", "num_steps_per_env", "save_interval"):
             if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be an integer >= 1, got {getattr(self, name)!r}")
+        unknown = set(self.disabled_constraint_groups) - {name for name, _ in CONSTRAINT_GROUPS}
+        if unknown:
+            raise ConfigError(f"disabled_constraint_groups: unknown {sorted(unknown)}; allowed: {[n for n, _ in CONSTRAINT_GROUPS]}")
         if self.ppo.schedule not in ("adaptive", "fixed"):
             raise ConfigError(f"ppo.schedule must be 'adaptive' or 'fixed', got {self.ppo.schedule!r}")
         return self
@@ -98,7 +106,11 @@ class TrainConfig:
             "actor": {**mlp, "hidden_dims": list(self.network.actor_hidden),
                       "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": self.network.init_noise_std}},
             "critic": {**mlp, "hidden_dims": list(self.network.critic_hidden)},
-            "schedule": {"scale_with_run_length": self.scale_schedules_with_run_length},
+            "schedule": {
+                "scale_with_run_length": self.scale_schedules_with_run_length,
+                "constraints": {"p_max": {**ConstraintCurriculumConfig().p_max,
+                                          **{name: (0.0, 0.0) for name in self.disabled_constraint_groups}}},
+            },
             "logger": "tensorboard",
             "check_for_nan": True,
         }

@@ -1,8 +1,9 @@
 """Reset sampling and domain randomisation (paper III-B, III-E), plus random base pushes.
 
 Every world flagged in ``reset`` draws a new episode: object shape, dimensions, mass, CoM and
-friction; object at the origin with a random yaw; goal uniform in the disc r <= goal_radius with a
-random yaw; robot base uniform (by area) in the annulus with a random yaw at nominal height; arm
+friction; object at the origin with a random yaw; goal uniform (by area) in the annulus (disc)
+``goal_radius`` with a random yaw; robot base uniform (by area) in the annulus ``robot_radius`` with a
+random yaw at nominal height (polar angles within the ``*_bearing`` ranges); arm
 joints uniform around the default; reach target uniform on the object's vertical surfaces.
 """
 
@@ -20,8 +21,12 @@ SHAPE_CYLINDER = 1
 @wp.struct
 class SamplingParams:
     robot_radius: wp.vec2  # [m]
-    goal_radius: float  # [m]
-    yaw_range: wp.vec2  # [rad]
+    goal_radius: wp.vec2  # [m]
+    robot_bearing: wp.vec2  # polar angle of the base position [rad]
+    goal_bearing: wp.vec2  # polar angle of the goal position [rad]
+    object_yaw: wp.vec2  # [rad]
+    goal_yaw: wp.vec2  # [rad]
+    base_yaw: wp.vec2  # [rad]
     surface_target: int  # 0: reach target at the centroid (ablation)
     friction: wp.vec2  # combined object-floor coefficient
     ground_friction: float  # the floor's own coefficient (Newton averages the two)
@@ -42,6 +47,14 @@ class SamplingParams:
 @wp.func
 def uniform(rng: wp.uint32, r: wp.vec2):
     return wp.randf(rng, r[0], r[1])
+
+
+@wp.func
+def polar_pose(rng: wp.uint32, radius: wp.vec2, bearing: wp.vec2, yaw: wp.vec2):
+    """(x, y, yaw): position uniform by area in the annulus sector, yaw uniform."""
+    r = wp.sqrt(wp.randf(rng, radius[0] * radius[0], radius[1] * radius[1]))
+    a = uniform(rng, bearing)
+    return wp.vec3(r * wp.cos(a), r * wp.sin(a), uniform(rng, yaw))
 
 
 @wp.func
@@ -124,19 +137,13 @@ def sample_episodes(reset: wp.array(dtype=int), seed: int, params: SamplingParam
         wp.randf(rng, params.com_fraction_lo[2], params.com_fraction_hi[2]) * d[2],
     )
     spec.friction[w] = uniform(rng, params.friction)
-    spec.object_yaw[w] = uniform(rng, params.yaw_range)
+    spec.object_yaw[w] = uniform(rng, params.object_yaw)
     spec.reach_target_o[w] = wp.vec3(0.0)
     if params.surface_target != 0:
         spec.reach_target_o[w] = surface_point(rng, shape, d)
-    # Goal uniform by area in the disc; robot uniform by area in the annulus.
-    r_goal = params.goal_radius * wp.sqrt(wp.randf(rng))
-    a_goal = wp.randf(rng, -wp.pi, wp.pi)
-    spec.goal[w] = wp.vec3(r_goal * wp.cos(a_goal), r_goal * wp.sin(a_goal), uniform(rng, params.yaw_range))
-    r_lo = params.robot_radius[0]
-    r_hi = params.robot_radius[1]
-    r_robot = wp.sqrt(wp.randf(rng, r_lo * r_lo, r_hi * r_hi))
-    a_robot = wp.randf(rng, -wp.pi, wp.pi)
-    spec.base[w] = wp.vec3(r_robot * wp.cos(a_robot), r_robot * wp.sin(a_robot), uniform(rng, params.yaw_range))
+    # Goal and robot uniform by area in their annuli.
+    spec.goal[w] = polar_pose(rng, params.goal_radius, params.goal_bearing, params.goal_yaw)
+    spec.base[w] = polar_pose(rng, params.robot_radius, params.robot_bearing, params.base_yaw)
     for j in range(NUM_ARM_JOINTS):
         spec.arm_q[w, j] = task.arm_default[j] + wp.randf(rng, -params.arm_joint_noise, params.arm_joint_noise)
     spec.base_mass_offset[w] = uniform(rng, params.base_mass_offset)

@@ -38,14 +38,21 @@ class SamplingConfig:
     """Reset sampling (paper III-B, Fig. 2A)."""
 
     robot_radius: tuple[float, float] = (1.2, 2.5)  # III-B: base in the annulus r in [1.2, 2.5] m
-    goal_radius: float = 2.0  # III-B: goal within r <= 2 m
-    yaw_range: tuple[float, float] = (-math.pi, math.pi)  # III-B: object, goal and base yaw
+    goal_radius: tuple[float, float] = (0.0, 2.0)  # III-B: goal within r <= 2 m
+    # Polar angles [rad] of the base and goal positions, and yaws; III-B: all uniform in [-pi, pi].
+    # Narrower ranges give curricula and reduced tasks (tests), never the paper's evaluation.
+    robot_bearing: tuple[float, float] = (-math.pi, math.pi)
+    goal_bearing: tuple[float, float] = (-math.pi, math.pi)
+    object_yaw: tuple[float, float] = (-math.pi, math.pi)
+    goal_yaw: tuple[float, float] = (-math.pi, math.pi)
+    base_yaw: tuple[float, float] = (-math.pi, math.pi)
     reach_target_on_surface: bool = True  # III-B; False = object centroid (Table I ablation)
 
     def validate(self, prefix: str = "sampling") -> None:
         _check_range(f"{prefix}.robot_radius", self.robot_radius, lo=0.0)
-        _check_positive(f"{prefix}.goal_radius", self.goal_radius, allow_zero=True)
-        _check_range(f"{prefix}.yaw_range", self.yaw_range, lo=-math.pi, hi=math.pi)
+        _check_range(f"{prefix}.goal_radius", self.goal_radius, lo=0.0)
+        for name in ("robot_bearing", "goal_bearing", "object_yaw", "goal_yaw", "base_yaw"):
+            _check_range(f"{prefix}.{name}", getattr(self, name), lo=-math.pi, hi=math.pi)
 
 
 @dataclass

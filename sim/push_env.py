@@ -255,9 +255,8 @@ class PushEnv(VecEnv):
 
         s, rnd = cfg.sampling, cfg.randomization
         sp = sampling.SamplingParams()
-        sp.robot_radius = wp.vec2(*s.robot_radius)
-        sp.goal_radius = s.goal_radius
-        sp.yaw_range = wp.vec2(*s.yaw_range)
+        for name in ("robot_radius", "goal_radius", "robot_bearing", "goal_bearing", "object_yaw", "goal_yaw", "base_yaw"):
+            setattr(sp, name, wp.vec2(*getattr(s, name)))
         sp.surface_target = int(s.reach_target_on_surface)
         sp.friction = wp.vec2(*rnd.friction)
         sp.ground_friction = cfg.sim.ground_friction

@@ -462,7 +462,9 @@ def test_compute_terminations():
 # --------------------------------------------------------------------------- reset sampling (III-B, III-E)
 def sampling_params(**overrides):
     p = sampling.SamplingParams()
-    values = dict(robot_radius=(1.2, 2.5), goal_radius=2.0, yaw_range=(-math.pi, math.pi), surface_target=1,
+    full = (-math.pi, math.pi)
+    values = dict(robot_radius=(1.2, 2.5), goal_radius=(0.0, 2.0), robot_bearing=full, goal_bearing=full,
+                  object_yaw=full, goal_yaw=full, base_yaw=full, surface_target=1,
                   friction=(0.4, 1.25), ground_friction=0.4, mass=(1.0, 10.0), com_fraction_lo=(-0.25, -0.25, -0.6),
                   com_fraction_hi=(0.25, 0.25, 0.25), size_lo=(0.25, 0.25, 0.4), size_hi=(0.75, 0.75, 1.0),
                   cylinder_probability=0.3, base_mass_offset=(-5.0, 5.0), push_interval_steps=(350.0, 500.0),
@@ -487,6 +489,27 @@ def random_spec(rng, n):
         base=np.column_stack([rng.uniform(-2.5, 2.5, (n, 2)), yaw()]),
         arm_q=rng.normal(size=(n, 5)), base_mass_offset=rng.uniform(-5.0, 5.0, n), first_push_step=rng.integers(0, 600, n),
     ))
+
+
+def test_sample_episodes_narrow_ranges():
+    """Reduced tasks and curricula: bearings, yaws and the goal annulus follow their ranges."""
+    n = 4000
+    _, task_np = random_state(np.random.default_rng(3), n)
+    task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(4), n))
+    params = sampling_params(robot_bearing=(2.0, 2.5), goal_bearing=(-0.3, 0.1), goal_radius=(0.5, 0.8),
+                             object_yaw=(0.2, 0.2), goal_yaw=(-1.0, -0.5), base_yaw=(3.0, 3.1))
+    launch(sampling.sample_episodes, n, arr(np.ones(n, np.int32), int), 5, params, task, spec)
+    out = read_struct(sampling.EpisodeSpec, spec)
+    goal, base = out["goal"], out["base"]
+    bearing = lambda xy: np.arctan2(xy[:, 1], xy[:, 0])  # noqa: E731
+    assert (bearing(base) >= 2.0 - 1e-5).all() and (bearing(base) <= 2.5 + 1e-5).all()
+    assert (bearing(goal) >= -0.3 - 1e-5).all() and (bearing(goal) <= 0.1 + 1e-5).all()
+    radius = np.linalg.norm(goal[:, :2], axis=1)
+    assert radius.min() >= 0.5 - 1e-5 and radius.max() <= 0.8 + 1e-5
+    assert_uniform((radius**2 - 0.25) / (0.64 - 0.25), "goal r^2 in the annulus")
+    np.testing.assert_allclose(out["object_yaw"], 0.2, atol=1e-6)
+    assert (goal[:, 2] >= -1.0).all() and (goal[:, 2] <= -0.5).all()
+    assert (base[:, 2] >= 3.0).all() and (base[:, 2] <= 3.1).all()
 
 
 def read_struct(cls, s):

@@ -47,7 +47,8 @@ class ProgressLogger(Logger):
         episode_reward = sum(self.rewbuffer) / len(self.rewbuffer) if len(self.rewbuffer) else float("nan")
         self.bar.write(
             f"it {it:5d} | {steps / collect_time:7.0f} world-steps/s | sim {collect_time:5.2f}s update {learn_time:5.2f}s"
-            f" | episode reward {episode_reward:8.2f} reach {summary.get('/reward/reach', float('nan')):.3f}"
+            f" | episode reward {episode_reward:8.2f} task {summary.get('/reward/task', float('nan')):.3f}"
+            f" reach {summary.get('/reward/reach', float('nan')):.3f}"
             f" | success {summary.get('/episode/success', float('nan')):.3f}"
             f" toppled {summary.get('/episode/toppled', float('nan')):.3f}"
             f" | delta {summary.get('CaT/mean_delta', float('nan')):.4f} | violated: {violations}"

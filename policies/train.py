@@ -73,7 +73,9 @@ class TrainConfig:
             return TrainConfig(preset=name, env=env, iterations=20000)
         if name == "cpu":
             env = PushEnvConfig(num_envs=512, device="cpu", randomize_first_episode_length=True)
-            return TrainConfig(preset=name, env=env, iterations=3000)
+            # Ours: half rsl_rl's initial action noise; with std 1 the exploration alone violates the
+            # base-command and arm-rate limits in most steps, which short runs cannot afford.
+            return TrainConfig(preset=name, env=env, iterations=3000, network=NetworkConfig(init_noise_std=0.5))
         raise ConfigError(f"preset must be one of {PRESETS}, got {name!r}")
 
     def validate(self) -> TrainConfig:

@@ -21,9 +21,13 @@ def test_vecenv_interface_and_zero_copy(small_env):
     assert reward.shape == (4,) and dones.shape == (4,)
     assert extras["time_outs"].dtype == torch.bool
     assert extras["constraints"].shape == (4, sum(size for _, size in env.constraint_groups)) == (4, 62)
-    # zero-copy: the torch tensors are the Warp buffers
-    assert obs["policy"].data_ptr() == env.policy_obs.ptr
+    # zero-copy: the torch views are the Warp buffers; observations handed out are copies, since the
+    # trainer holds on to the observation it acted on while the next step overwrites the buffer
+    assert env.policy_obs_t.data_ptr() == env.policy_obs.ptr
     assert extras["constraints"].data_ptr() == env.constraints.ptr
+    before = obs["policy"].clone()
+    env.step(torch.ones(4, 11))
+    assert torch.equal(obs["policy"], before)
     # critic = noiseless policy terms + privileged terms: noise makes them differ, but only by the table's widths
     assert (obs["policy"] - obs["critic"][:, :54]).abs().max() <= 0.5 + 1e-6
 

@@ -1,0 +1,487 @@
+"""Evaluation of an exported push policy (``policy.onnx``, run by onnxruntime) in the push environment.
+
+``dynpush eval policy.onnx`` reproduces the paper's simulation tables (section IV-A/B):
+
+- **Table I**: success rate and toppled-object rate over one episode per world. All worlds start
+  together (``PushEnv.reset()`` without randomized episode steps) and are stepped for exactly one
+  episode length; a world that ends early is auto-reset by the environment and its later steps are
+  masked, so every world contributes exactly its first episode. Success is the success flag at the
+  episode's last step (as in training logs); ``reached_rate`` counts episodes that met the tolerance at
+  any step.
+- **Table II**: per constraint group, the percentage of an episode's steps with any column of the group
+  violated (value > 0), averaged over episodes.
+- time to success (the first step with the success flag, successful episodes only) and the breakdown
+  by object shape.
+
+The environment is the one the policy was trained in: its config comes from the ``training_config``
+of the policy's ONNX metadata, changed only by ``--num-envs``, ``--noise/--no-noise`` and ``--set
+env.field=value`` overrides.
+
+Ablations of Table I are separate trainings, then the same evaluation::
+
+    dynpush train --name no_surface --set env.sampling.reach_target_on_surface=False
+    dynpush train --name no_balance --set "disabled_constraint_groups=('object_balance',)"
+    dynpush train --name no_surface_no_balance --set env.sampling.reach_target_on_surface=False \
+        "disabled_constraint_groups=('object_balance',)"
+    dynpush export runs/no_balance && dynpush eval runs/no_balance/policy.onnx
+
+``eval.json`` names the paper row that matches the policy's training config.
+
+``dynpush eval policy.onnx --footprints`` is the study of the paper's Fig. "EE height boxplot"
+(IV-D): cuboids with six square xy-footprints across the training range, fixed height, mass, CoM and
+friction, observation noise off, N successful episodes per footprint; the end-effector height (world z,
+m) while it touches the object.
+
+Frames and units: world frame Z-up (every environment has its origin at the world origin), SI units,
+quaternions (x, y, z, w).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from dynpush.kernels.constraints import CONSTRAINT_GROUPS
+from dynpush.kernels.observations import POLICY_TERMS, PRIVILEGED_TERMS
+from dynpush.runtime.observation import quat_to_matrix
+from dynpush.sim.config import ConfigError, PushEnvConfig
+from dynpush.sim.episode import SHAPES
+
+from .export import OnnxPolicy
+
+# Paper Table I (success rate %, toppled object rate %), keyed by
+# (reach target sampled on the object surface, object balance constraint on).
+PAPER_TABLE_I: dict[tuple[bool, bool], tuple[str, float, float]] = {
+    (True, True): ("Ours (with all the above)", 91.35, 3.46),
+    (True, False): ("Ours w/o object balance constraint", 90.00, 6.93),
+    (False, True): ("Ours w/o sampling on object surface", 49.80, 4.50),
+    (False, False): ("Ours w/o sampling on object surface & object balance constraint", 88.70, 7.73),
+}
+# Paper Table II: average proportion of time (%) each constraint group is violated.
+PAPER_TABLE_II: dict[str, float] = {
+    "base_command": 0.059, "arm_command": 0.014, "arm_action_rate": 0.032, "arm_joint_position": 0.011,
+    "arm_joint_velocity": 0.007, "arm_joint_torque": 0.189, "leg_joint_torque": 0.473, "collision": 0.01,
+    "object_balance": 0.298,
+}
+
+
+def critic_column(name: str) -> int:
+    """First column of a term in the critic observation (``PushEnv.critic_obs_t``)."""
+    column = 0
+    for term, size in (*POLICY_TERMS, *PRIVILEGED_TERMS):
+        if term == name:
+            return column
+        column += size
+    raise KeyError(f"no critic observation term {name!r}")
+
+
+EE_CONTACT_COLUMN = critic_column("ee_object_contact")  # 54: 1 while the end-effector touches the object
+
+
+# ---------------------------------------------------------------------------------------------- environment
+def env_config_for(policy: OnnxPolicy, num_envs: int, noise: bool | None = None, device: str = "cpu",
+                   seed: int = 0, overrides: tuple[str, ...] | list[str] = ()) -> PushEnvConfig:
+    """The environment a policy was trained in (from its metadata), for evaluation.
+
+    ``noise`` switches the actor observation noise (None keeps the training value); ``overrides`` are
+    ``env.field=value`` strings applied last. Episodes start synchronized (no randomized first length).
+    """
+    from .train import TrainConfig, apply_overrides
+
+    cfg = TrainConfig.from_dict(policy.contract.training_config)
+    cfg.env.num_envs = num_envs
+    cfg.env.device = device
+    cfg.env.seed = seed
+    cfg.env.randomize_first_episode_length = False
+    if noise is not None:
+        cfg.env.noise.enabled = noise
+    for item in overrides:
+        if not item.startswith("env."):
+            raise ConfigError(f"evaluation overrides address the environment (env.field=value), got {item!r}")
+    apply_overrides(cfg, list(overrides))
+    return cfg.env.validate()
+
+
+def make_env(env_cfg: PushEnvConfig):
+    """A PushEnv (imported here: building one compiles and captures Warp kernels)."""
+    from dynpush.sim.push_env import PushEnv
+
+    return PushEnv(env_cfg)
+
+
+def yaw_of(quat: np.ndarray) -> np.ndarray:
+    """Yaw [rad] of quaternions (..., 4) stored (x, y, z, w)."""
+    x, y, z, w = np.moveaxis(quat, -1, 0)
+    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+class EnvProbe:
+    """World-frame poses of every world's base, object and end-effector, read from the environment's state.
+
+    Reads the Newton state ``state_0`` (after a control step it holds the step's final state) through a
+    zero-copy view; positions in m, quaternions (x, y, z, w).
+    """
+
+    def __init__(self, env):
+        import warp as wp
+
+        self.env = env
+        self.body_q = wp.to_torch(env.state_0.body_q)  # (bodies, 7): position, quaternion
+        self.joint_q = wp.to_torch(env.state_0.joint_q)
+        scene = env.scene
+        self.base_body = torch.as_tensor(scene.base_body, dtype=torch.long, device=self.body_q.device)
+        self.object_body = torch.as_tensor(scene.object_body, dtype=torch.long, device=self.body_q.device)
+        self.ee_body = torch.as_tensor(scene.ee_body, dtype=torch.long, device=self.body_q.device)
+        self.arm_q_index = torch.as_tensor(np.asarray(scene.arm_q_start)[:, None] + np.arange(5), dtype=torch.long,
+                                           device=self.body_q.device)
+        self.ee_offset = np.asarray(scene.ee_offset, dtype=np.float64)  # in the EE body frame
+
+    def _pose(self, bodies: torch.Tensor) -> np.ndarray:
+        return self.body_q[bodies].cpu().numpy().astype(np.float64)
+
+    def base(self) -> np.ndarray:
+        """(n, 7) base pose: position (m), quaternion (x, y, z, w)."""
+        return self._pose(self.base_body)
+
+    def object(self) -> np.ndarray:
+        """(n, 7) object frame pose (the centroid): position (m), quaternion (x, y, z, w)."""
+        return self._pose(self.object_body)
+
+    def ee_position(self) -> np.ndarray:
+        """(n, 3) end-effector point (world, m)."""
+        pose = self._pose(self.ee_body)
+        return pose[:, :3] + quat_to_matrix(pose[:, 3:]) @ self.ee_offset
+
+    def arm_q(self) -> np.ndarray:
+        """(n, 5) absolute positions [rad] of the 5 controlled arm joints."""
+        return self.joint_q[self.arm_q_index].cpu().numpy().astype(np.float64)
+
+    def ee_in_object(self) -> np.ndarray:
+        """(n, 3) end-effector point in the object frame (m)."""
+        pose = self.object()
+        return np.einsum("nji,nj->ni", quat_to_matrix(pose[:, 3:]), self.ee_position() - pose[:, :3])
+
+
+# ---------------------------------------------------------------------------------------------- rollout
+class StepObserver(Protocol):
+    """Receives every control step of a first-episode rollout."""
+
+    def observe(self, step: int, in_episode: torch.Tensor, continuing: torch.Tensor) -> None:
+        """Called after ``env.step`` number ``step`` (0-based).
+
+        ``in_episode``: worlds whose first episode contained this step; values the step computes before
+        its auto-reset (``constraints_t``, ``success_t``) are theirs. ``continuing``: the subset whose first
+        episode goes on, whose post-step state and observations (``critic_obs_t``, :class:`EnvProbe`) are
+        still that episode's.
+        """
+
+
+@dataclass
+class FirstEpisodes:
+    """Outcome of every world's first episode (arrays over worlds)."""
+
+    length: np.ndarray  # control steps in the episode
+    success: np.ndarray  # bool: success flag at the last step
+    toppled: np.ndarray  # bool: ended by the object toppling
+    first_success_step: np.ndarray  # 1-based step of the first success flag, 0 if never
+    shape: np.ndarray  # 0 cuboid, 1 cylinder
+
+    @staticmethod
+    def concatenate(parts: list[FirstEpisodes], count: int) -> FirstEpisodes:
+        """The first ``count`` worlds of several rounds."""
+        return FirstEpisodes(**{f.name: np.concatenate([getattr(p, f.name) for p in parts])[:count]
+                                for f in dataclasses.fields(FirstEpisodes)})
+
+
+def run_first_episodes(env, policy: OnnxPolicy, observers: list[StepObserver] = (),
+                       progress: tqdm | None = None) -> FirstEpisodes:
+    """Resets all worlds together and runs the policy for one episode length; see the module docstring."""
+    n = env.num_envs
+    obs = env.reset(randomize_episode_step=False)["policy"]
+    shape = env.task.object_shape.numpy().copy()
+    in_episode = torch.ones(n, dtype=torch.bool, device=env.device)
+    length = torch.zeros(n, dtype=torch.long, device=env.device)
+    first_success = torch.zeros(n, dtype=torch.long, device=env.device)
+    success = torch.zeros(n, dtype=torch.bool, device=env.device)
+    toppled = torch.zeros(n, dtype=torch.bool, device=env.device)
+    for step in range(env.max_episode_length):
+        actions = policy(obs.cpu().numpy())
+        obs = env.step(torch.from_numpy(actions).to(env.device))[0]["policy"]
+        ended = in_episode & (env.reset_t != 0)
+        continuing = in_episode & ~ended
+        length += in_episode
+        reached = in_episode & (env.success_t != 0) & (first_success == 0)
+        first_success[reached] = step + 1
+        success[ended] = env.episode_success_t[ended] == 1
+        toppled[ended] = env.episode_toppled_t[ended] == 1
+        for observer in observers:
+            observer.observe(step, in_episode, continuing)
+        in_episode = continuing
+        if progress is not None:
+            progress.update(1)
+    if bool(in_episode.any()):
+        raise RuntimeError("a world's first episode outlasted the episode length (environment time-out broken)")
+    return FirstEpisodes(length=length.cpu().numpy(), success=success.cpu().numpy(), toppled=toppled.cpu().numpy(),
+                         first_success_step=first_success.cpu().numpy(), shape=shape)
+
+
+class ConstraintObserver:
+    """Counts, per world and constraint group, the first-episode steps with any column violated (> 0)."""
+
+    def __init__(self, env):
+        self.env = env
+        self.sizes = [size for _, size in env.constraint_groups]
+        self.violated = torch.zeros(env.num_envs, len(self.sizes), dtype=torch.long, device=env.device)
+
+    def observe(self, step: int, in_episode: torch.Tensor, continuing: torch.Tensor) -> None:
+        groups = (self.env.constraints_t > 0).split(self.sizes, dim=1)
+        self.violated += torch.stack([g.any(dim=1) for g in groups], dim=1) & in_episode[:, None]
+
+
+class ContactHeightObserver:
+    """Collects, per world, the end-effector height (world z, m) at every step it touches the object."""
+
+    def __init__(self, env):
+        self.env = env
+        self.probe = EnvProbe(env)
+        self.heights: list[list[float]] = [[] for _ in range(env.num_envs)]
+
+    def observe(self, step: int, in_episode: torch.Tensor, continuing: torch.Tensor) -> None:
+        touching = (continuing & (self.env.critic_obs_t[:, EE_CONTACT_COLUMN] > 0.5)).cpu().numpy()
+        if touching.any():
+            z = self.probe.ee_position()[:, 2]
+            for w in np.flatnonzero(touching):
+                self.heights[w].append(float(z[w]))
+
+
+def _percent(mask: np.ndarray) -> float:
+    return 100.0 * float(mask.mean()) if mask.size else float("nan")
+
+
+def _stats(values: np.ndarray) -> dict[str, float | int]:
+    if values.size == 0:
+        return {"count": 0}
+    q = np.percentile(values, [10, 25, 50, 75, 90])
+    return {"count": int(values.size), "mean": float(values.mean()), "p10": float(q[0]), "p25": float(q[1]),
+            "median": float(q[2]), "p75": float(q[3]), "p90": float(q[4]), "min": float(values.min()),
+            "max": float(values.max())}
+
+
+# ---------------------------------------------------------------------------------------------- Tables I and II
+@dataclass
+class EvalConfig:
+    """``dynpush eval`` (Tables I and II)."""
+
+    episodes: int = 4096  # IV-A: 4096 environments, a single episode each
+    num_envs: int | None = None  # worlds simulated together (default: min(episodes, 1024)); rounds run until done
+    noise: bool | None = None  # actor observation noise (None: as in training)
+    device: str = "cpu"
+    seed: int = 0
+    overrides: tuple[str, ...] = ()  # env.field=value
+
+    def validate(self) -> EvalConfig:
+        if not isinstance(self.episodes, int) or self.episodes < 1:
+            raise ConfigError(f"episodes must be an integer >= 1, got {self.episodes!r}")
+        if self.num_envs is not None and (not isinstance(self.num_envs, int) or self.num_envs < 1):
+            raise ConfigError(f"num_envs must be an integer >= 1, got {self.num_envs!r}")
+        return self
+
+    @property
+    def worlds(self) -> int:
+        return min(self.episodes, self.num_envs or 1024)
+
+
+def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
+    """Runs ``cfg.episodes`` first episodes and writes ``eval.json`` and ``eval.png`` into ``out_dir``."""
+    cfg.validate()
+    policy = OnnxPolicy(policy_path, batched=True)
+    env_cfg = env_config_for(policy, cfg.worlds, cfg.noise, cfg.device, cfg.seed, cfg.overrides)
+    env = make_env(env_cfg)
+    rounds = math.ceil(cfg.episodes / cfg.worlds)
+    parts, violated = [], []
+    start = time.perf_counter()
+    with tqdm(total=rounds * env.max_episode_length, desc="eval", unit="step") as bar:
+        for _ in range(rounds):
+            constraints = ConstraintObserver(env)
+            parts.append(run_first_episodes(env, policy, [constraints], bar))
+            violated.append(constraints.violated.cpu().numpy())
+    elapsed = time.perf_counter() - start
+    episodes = FirstEpisodes.concatenate(parts, cfg.episodes)
+    violated_steps = np.concatenate(violated)[: cfg.episodes]
+    world_steps = rounds * cfg.worlds * env.max_episode_length
+
+    dt = env_cfg.control_dt
+    violation = 100.0 * (violated_steps / episodes.length[:, None]).mean(axis=0)
+    time_to_success = episodes.first_success_step[episodes.success] * dt
+    by_shape = {}
+    for index, name in enumerate(SHAPES):
+        mask = episodes.shape == index
+        by_shape[name] = {"episodes": int(mask.sum()), "success_rate": _percent(episodes.success[mask]),
+                          "toppled_rate": _percent(episodes.toppled[mask]),
+                          "time_to_success_s": _stats(episodes.first_success_step[mask & episodes.success] * dt)}
+    training = policy.contract.training_config
+    row = (training["env"]["sampling"]["reach_target_on_surface"],
+           "object_balance" not in training.get("disabled_constraint_groups", []))
+    paper_name, paper_success, paper_toppled = PAPER_TABLE_I[row]
+    result = {
+        "policy": str(policy_path),
+        "episodes": cfg.episodes,
+        "success_rate": _percent(episodes.success),
+        "toppled_rate": _percent(episodes.toppled),
+        "reached_rate": _percent(episodes.first_success_step > 0),
+        "constraint_violation_percent": {name: float(v) for (name, _), v in zip(CONSTRAINT_GROUPS, violation)},
+        "time_to_success_s": _stats(time_to_success),
+        "episode_length_s": _stats(episodes.length * dt),
+        "by_shape": by_shape,
+        "paper": {"table_I_row": paper_name, "success_rate": paper_success, "toppled_rate": paper_toppled,
+                  "constraint_violation_percent": PAPER_TABLE_II},
+        "runtime": {"seconds": elapsed, "world_steps": world_steps, "rounds": rounds, "worlds": cfg.worlds,
+                    "seconds_per_1000_world_steps": 1000.0 * elapsed / world_steps},
+        "config": {"eval": dataclasses.asdict(cfg), "env": dataclasses.asdict(env_cfg),
+                   "training_config_sha256": policy.contract.training_config_sha256},
+    }
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "eval.json").write_text(json.dumps(result, indent=2))
+    plot_eval(result, time_to_success, out_dir / "eval.png")
+    return result
+
+
+def plot_eval(result: dict, time_to_success: np.ndarray, path: Path) -> None:
+    """Table II beside the paper's values, Table I (success/toppled) beside the paper's, time to success."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(16, 4.8), layout="constrained")
+    ax_constraints, ax_rates, ax_time = fig.subplots(1, 3, width_ratios=(2.2, 1.2, 1.2))
+    names = list(result["constraint_violation_percent"])
+    x = np.arange(len(names))
+    ours = [result["constraint_violation_percent"][n] for n in names]
+    paper = [result["paper"]["constraint_violation_percent"][n] for n in names]
+    ax_constraints.bar(x - 0.2, ours, 0.4, label="this policy")
+    ax_constraints.bar(x + 0.2, paper, 0.4, label="paper (Table II)", color="tab:gray")
+    ax_constraints.set_xticks(x, [n.replace("_", "\n") for n in names], fontsize=8)
+    ax_constraints.set_yscale("symlog", linthresh=0.01)
+    ax_constraints.set_ylabel("time violated [% of episode]")
+    ax_constraints.set_title("Constraint violation (Table II)")
+    ax_constraints.legend()
+
+    groups = ["success", "toppled"]
+    bars = [(f"this policy ({result['episodes']})", result, None)]
+    bars += [(f"{shape} ({stats['episodes']})", stats, None) for shape, stats in result["by_shape"].items()]
+    bars += [("paper: " + result["paper"]["table_I_row"], result["paper"], "tab:gray")]
+    width = 0.8 / len(bars)
+    x = np.arange(len(groups))
+    for index, (label, source, color) in enumerate(bars):
+        values = [source["success_rate"], source["toppled_rate"]]
+        drawn = ax_rates.bar(x - 0.4 + width * (index + 0.5), values, width, label=label, color=color)
+        ax_rates.bar_label(drawn, fmt="%.1f", fontsize=7)
+    ax_rates.set_xticks(x, groups)
+    ax_rates.set_ylim(0, 105)
+    ax_rates.set_ylabel("rate [%]")
+    ax_rates.set_title("Success and toppled objects (Table I)")
+    ax_rates.legend(fontsize=7, loc="upper right")
+
+    if time_to_success.size:
+        ax_time.hist(time_to_success, bins=30, color="tab:green")
+        ax_time.axvline(float(np.median(time_to_success)), color="k", ls="--", label="median")
+        ax_time.legend()
+    else:
+        ax_time.text(0.5, 0.5, "no successful episode", ha="center", va="center", transform=ax_time.transAxes)
+    ax_time.set_xlabel("time to success [s]")
+    ax_time.set_ylabel("episodes")
+    ax_time.set_title("Time to success")
+    fig.suptitle(Path(result["policy"]).name)
+    fig.savefig(path, dpi=110)
+
+
+# ---------------------------------------------------------------------------------------------- footprints
+@dataclass
+class FootprintConfig:
+    """The object-footprint study (paper IV-D, Fig. "EE height boxplot").
+
+    Square xy-footprints equally spaced across the training range of ``randomization.size_x/size_y``;
+    height, mass, CoM and friction fixed at mid-range values; cuboids only; no observation noise.
+    """
+
+    sides: tuple[float, ...] = (0.25, 0.35, 0.45, 0.55, 0.65, 0.75)  # m: six footprints over [0.25, 0.75]
+    height: float = 0.7  # m (mid-range of [0.4, 1.0])
+    mass: float = 5.0  # kg
+    friction: float = 0.8  # combined object-floor coefficient
+    successful_episodes: int = 1000  # per footprint (IV-D)
+    max_rounds: int = 50  # per footprint; stops a policy that rarely succeeds
+    num_envs: int = 512
+    device: str = "cpu"
+    seed: int = 0
+    overrides: tuple[str, ...] = ()  # env.field=value, applied before the study's own settings
+
+    def validate(self) -> FootprintConfig:
+        if not self.sides or not all(0.05 <= s <= 2.0 for s in self.sides):
+            raise ConfigError(f"footprints.sides must be lengths in [0.05, 2.0] m, got {self.sides!r}")
+        for name in ("successful_episodes", "max_rounds", "num_envs"):
+            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
+                raise ConfigError(f"footprints.{name} must be an integer >= 1, got {getattr(self, name)!r}")
+        return self
+
+    def env_overrides(self, side: float) -> list[str]:
+        """``env.*`` overrides that pin the object to one footprint."""
+        fixed = {"size_x": (side, side), "size_y": (side, side), "size_z": (self.height, self.height),
+                 "mass": (self.mass, self.mass), "friction": (self.friction, self.friction),
+                 "com_fraction_x": (0.0, 0.0), "com_fraction_y": (0.0, 0.0), "com_fraction_z": (0.0, 0.0),
+                 "cylinder_probability": 0.0}
+        return [*self.overrides, *(f"env.randomization.{k}={v!r}" for k, v in fixed.items()), "env.noise.enabled=False"]
+
+
+def footprint_study(policy_path: Path, cfg: FootprintConfig, out_dir: Path) -> dict:
+    """Runs the footprint study; writes ``footprints.json`` and ``footprints.png`` into ``out_dir``."""
+    cfg.validate()
+    policy = OnnxPolicy(policy_path, batched=True)
+    rows, heights = [], []
+    for side in cfg.sides:
+        env = make_env(env_config_for(policy, cfg.num_envs, None, cfg.device, cfg.seed, cfg.env_overrides(side)))
+        samples: list[float] = []
+        attempted = successful = 0
+        with tqdm(total=cfg.successful_episodes, desc=f"footprint {side:.2f} m", unit="success") as bar:
+            for _ in range(cfg.max_rounds):
+                observer = ContactHeightObserver(env)
+                episodes = run_first_episodes(env, policy, [observer])
+                attempted += env.num_envs
+                for w in np.flatnonzero(episodes.success)[: cfg.successful_episodes - successful]:
+                    samples.extend(observer.heights[w])
+                    successful += 1
+                    bar.update(1)
+                if successful >= cfg.successful_episodes:
+                    break
+        values = np.asarray(samples)
+        heights.append(values)
+        rows.append({"side_m": side, "episodes": attempted, "successful_episodes": successful,
+                     "ee_height_in_contact_m": _stats(values)})
+    result = {"policy": str(policy_path), "footprints": rows,
+              "config": dataclasses.asdict(cfg) | {"training_config_sha256": policy.contract.training_config_sha256}}
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "footprints.json").write_text(json.dumps(result, indent=2))
+    plot_footprints(result, heights, out_dir / "footprints.png")
+    return result
+
+
+def plot_footprints(result: dict, heights: list[np.ndarray], path: Path) -> None:
+    """Box plot of the EE height in contact per footprint (the paper's Fig. "EE height boxplot")."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8, 4.5), layout="constrained")
+    ax = fig.subplots()
+    rows = result["footprints"]
+    labels = [f"{r['side_m']:.2f}x{r['side_m']:.2f}\n({r['successful_episodes']} ep.)" for r in rows]
+    ax.boxplot([h if h.size else [np.nan] for h in heights], tick_labels=labels, showfliers=False)
+    ax.set_xlabel("object xy-footprint [m] (successful episodes)")
+    ax.set_ylabel("EE height in contact, world z [m]")
+    ax.set_title(f"EE height while pushing, object height {result['config']['height']} m")
+    ax.grid(axis="y", alpha=0.3)
+    fig.savefig(path, dpi=110)

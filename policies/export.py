@@ -1,0 +1,204 @@
+"""ONNX export of a trained push policy with its contract, and the loader that runs such a file.
+
+``policy.onnx`` (DESIGN.md decision 4): input ``obs`` [1, 54] float32, the un-normalised actor
+observation (layout ``dynpush.runtime.observation.POLICY_OBSERVATION_LAYOUT``); output ``actions``
+[1, 11] float32, the deterministic mean of the policy *before* the environment's clip to
+``+-action_clip``. The empirical observation normaliser is part of the graph. The graph is rsl_rl's own
+export module (``MLPModel.as_onnx``: normaliser, MLP, deterministic output), traced with the same
+``torch.onnx.export`` arguments as ``OnPolicyRunner.export_policy_to_onnx`` (opset 18). The file's
+``metadata_props`` hold :class:`~dynpush.runtime.contract.PolicyContract`, filled from the run's
+``config.json`` and the robot of the scene (``robot.usda``).
+
+``training_config_sha256`` is the SHA-256 of the training config serialised as canonical JSON
+(``json.dumps(config, sort_keys=True, separators=(",", ":"))``), so a reader can verify the embedded
+``training_config`` with :func:`config_sha256`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import onnx
+import onnxruntime
+
+from dynpush.runtime.contract import INPUT_NAME, OUTPUT_NAME, ContractError, PolicyContract
+from dynpush.runtime.observation import NUM_ACTIONS, NUM_ARM_JOINTS, POLICY_OBSERVATION_SIZE
+
+OPSET = 18  # as rsl_rl's OnPolicyRunner.export_policy_to_onnx
+BATCH_DIM = "batch"  # symbolic batch dimension of a relaxed in-memory copy (OnnxPolicy(batched=True))
+
+
+def config_sha256(config: dict) -> str:
+    """SHA-256 (hex) of ``config`` as canonical JSON (sorted keys, no spaces)."""
+    return hashlib.sha256(json.dumps(config, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+def load_run_config(run_dir: Path):
+    """The :class:`~dynpush.policies.train.TrainConfig` of a run folder (its ``config.json``)."""
+    from dynpush.policies.train import TrainConfig
+
+    path = Path(run_dir) / "config.json"
+    if not path.exists():
+        raise FileNotFoundError(f"{path} not found: {run_dir} is not a dynpush run folder")
+    return TrainConfig.from_dict(json.loads(path.read_text()))
+
+
+def resolve_checkpoint(run_dir: Path, checkpoint: str | None) -> Path:
+    """``run_dir / checkpoint``, or the run's latest ``model_K.pt`` when ``checkpoint`` is None."""
+    from dynpush.policies.train import latest_checkpoint
+
+    run_dir = Path(run_dir)
+    path = latest_checkpoint(run_dir) if checkpoint is None else run_dir / checkpoint
+    if path is None or not path.exists():
+        raise FileNotFoundError(f"checkpoint {checkpoint or 'model_*.pt'} not found in {run_dir}")
+    return path
+
+
+def build_actor(cfg):
+    """rsl_rl's actor ``MLPModel`` exactly as the training runner builds it from ``cfg.runner_cfg()``."""
+    import torch
+    from rsl_rl.models import MLPModel
+    from tensordict import TensorDict
+
+    runner_cfg = cfg.runner_cfg()
+    actor_cfg = {k: v for k, v in runner_cfg["actor"].items() if k != "class_name"}
+    obs = TensorDict({"policy": torch.zeros(1, POLICY_OBSERVATION_SIZE)}, batch_size=[1])
+    return MLPModel(obs, runner_cfg["obs_groups"], "actor", NUM_ACTIONS, **actor_cfg)
+
+
+def load_actor(checkpoint: Path, cfg):
+    """The trained actor (normaliser included) of a checkpoint, in eval mode on the CPU."""
+    import torch
+
+    try:
+        saved = torch.load(checkpoint, weights_only=False, map_location="cpu")
+    except Exception as error:  # a truncated or foreign file
+        raise RuntimeError(f"cannot read checkpoint {checkpoint}: {error}") from error
+    if not isinstance(saved, dict) or "actor_state_dict" not in saved:
+        raise RuntimeError(f"checkpoint {checkpoint} has no 'actor_state_dict' (not an rsl_rl checkpoint)")
+    actor = build_actor(cfg)
+    try:
+        actor.load_state_dict(saved["actor_state_dict"])
+    except RuntimeError as error:
+        raise RuntimeError(f"checkpoint {checkpoint} does not fit the network of the run's config.json: {error}") from error
+    return actor.eval()
+
+
+def build_contract(cfg) -> PolicyContract:
+    """The contract of a policy trained with ``cfg`` (a TrainConfig), with the robot read from ``robot.usda``."""
+    import dataclasses
+    import math
+
+    import warp as wp
+
+    import dynpush
+    from dynpush.assets_usd import ARM_JOINT_NAMES
+    from dynpush.sim.scene import build_scene
+
+    wp.config.quiet = True  # as dynpush.sim.push_env: no per-module load lines
+    env = cfg.env
+    robot = build_scene(1, "cpu", env.sim.ground_friction).robot
+    arm = slice(0, NUM_ARM_JOINTS)
+    noise = {f.name: getattr(env.noise, f.name) for f in dataclasses.fields(env.noise) if f.name != "enabled"}
+    training_config = cfg.to_dict()
+    training_config = json.loads(json.dumps(training_config))  # tuples -> lists, exactly as the metadata stores it
+    contract = PolicyContract(
+        observation_noise=noise,
+        base_command_default=list(env.actions.base_default),
+        base_command_scale=list(env.actions.base_scale),
+        base_command_lower=list(env.constraints.base_command_lower),
+        base_command_upper=list(env.constraints.base_command_upper),
+        arm_joint_names=list(ARM_JOINT_NAMES[arm]),
+        arm_default_joint_positions=robot.arm_default[arm].tolist(),
+        arm_action_scale=env.actions.arm_scale,
+        arm_joint_lower=robot.arm_lower[arm].tolist(),
+        arm_joint_upper=robot.arm_upper[arm].tolist(),
+        arm_joint_velocity_limit=robot.arm_velocity_limit[arm].tolist(),
+        frozen_joint_name=ARM_JOINT_NAMES[NUM_ARM_JOINTS],
+        frozen_joint_position=float(robot.arm_default[NUM_ARM_JOINTS]),
+        action_clip=env.actions.clip,
+        control_period_s=env.control_dt,
+        success_distance_m=env.rewards.success_distance,
+        success_angle_rad=math.radians(env.rewards.success_angle_deg),
+        dynpush_version=dynpush.__version__,
+        training_config=training_config,
+        training_config_sha256=config_sha256(training_config),
+    )
+    contract.validate()
+    return contract
+
+
+def export_policy(run_dir: Path, checkpoint: str | None = None, out: Path | None = None) -> Path:
+    """Exports a run's checkpoint (default: the latest) to ONNX with its contract; returns the file.
+
+    ``out`` defaults to ``run_dir / "policy.onnx"``.
+    """
+    import torch
+
+    run_dir = Path(run_dir)
+    cfg = load_run_config(run_dir)
+    checkpoint_path = resolve_checkpoint(run_dir, checkpoint)
+    module = load_actor(checkpoint_path, cfg).as_onnx(verbose=False).to("cpu").eval()
+    out = Path(out) if out is not None else run_dir / "policy.onnx"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    torch.onnx.export(module, module.get_dummy_inputs(), str(out), export_params=True, opset_version=OPSET,
+                      verbose=False, input_names=module.input_names, output_names=module.output_names)
+    model = onnx.load(str(out))
+    contract = build_contract(cfg)
+    metadata = contract.to_metadata() | {"checkpoint": checkpoint_path.name}
+    onnx.helper.set_model_props(model, metadata)
+    model.doc_string = f"dynpush push policy from {run_dir.name}/{checkpoint_path.name}; contract in metadata_props"
+    onnx.checker.check_model(model)
+    onnx.save(model, str(out))
+    return out
+
+
+def read_metadata(model: onnx.ModelProto) -> dict[str, str]:
+    """The ``metadata_props`` of an ONNX model as a dict."""
+    return {prop.key: prop.value for prop in model.metadata_props}
+
+
+class OnnxPolicy:
+    """A ``policy.onnx`` executed by onnxruntime, checked against the contract on load and on every call.
+
+    With ``batched=True`` the batch dimension of ``obs`` and ``actions`` is relaxed to a symbolic one in
+    an in-memory copy (same graph and weights), so that all worlds of an environment run in one call.
+    """
+
+    def __init__(self, path: Path, batched: bool = False):
+        self.path = Path(path)
+        if not self.path.exists():
+            raise FileNotFoundError(f"policy file {self.path} not found")
+        model = onnx.load(str(self.path))
+        self.contract = PolicyContract.from_metadata(read_metadata(model))
+        inputs = {v.name: v for v in model.graph.input}
+        outputs = {v.name: v for v in model.graph.output}
+        if INPUT_NAME not in inputs or OUTPUT_NAME not in outputs:
+            raise ContractError(f"{self.path}: graph must have input {INPUT_NAME!r} and output {OUTPUT_NAME!r},"
+                                f" has {sorted(inputs)} -> {sorted(outputs)}")
+        for value, size in ((inputs[INPUT_NAME], POLICY_OBSERVATION_SIZE), (outputs[OUTPUT_NAME], NUM_ACTIONS)):
+            dims = [d.dim_value if d.HasField("dim_value") else d.dim_param for d in value.type.tensor_type.shape.dim]
+            if len(dims) != 2 or dims[1] != size:
+                raise ContractError(f"{self.path}: {value.name!r} has shape {dims}, expected [batch, {size}]")
+            if batched:
+                value.type.tensor_type.shape.dim[0].dim_param = BATCH_DIM
+        if batched:
+            del model.graph.value_info[:]  # shape hints of intermediates carry the fixed batch size
+        self.batch_size: int | None = None if batched else 1
+        options = onnxruntime.SessionOptions()
+        options.intra_op_num_threads = 1
+        options.inter_op_num_threads = 1
+        self.session = onnxruntime.InferenceSession(model.SerializeToString(), options, providers=["CPUExecutionProvider"])
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        """Actions [B, 11] (float32, unclipped mean) for observations ``obs`` [B, 54] (B = 1 unless batched)."""
+        obs = np.asarray(obs)
+        expected = f"[{self.batch_size or 'B'}, {POLICY_OBSERVATION_SIZE}]"
+        if obs.ndim != 2 or obs.shape[1] != POLICY_OBSERVATION_SIZE or (self.batch_size and obs.shape[0] != self.batch_size):
+            raise ValueError(f"policy input {INPUT_NAME!r} must have shape {expected} (float32), got {list(obs.shape)}")
+        if obs.dtype != np.float32:
+            raise ValueError(f"policy input {INPUT_NAME!r} must be float32, got {obs.dtype}")
+        return self.session.run([OUTPUT_NAME], {INPUT_NAME: obs})[0]

@@ -1,9 +1,121 @@
-"""``dynpush`` subcommands of dynpush.policies (registered by ``dynpush.cli``)."""
+"""``dynpush`` subcommands of dynpush.policies (registered by ``dynpush.cli``): export, eval, play."""
 
 from __future__ import annotations
 
 import argparse
+import json
+from pathlib import Path
+
+EVAL_EPILOG = """\
+modes (one at a time):
+  (default)          Tables I and II: --episodes first episodes -> eval.json, eval.png
+  --scenario FILE    objects through goal sequences (scenarios/*.yaml) -> scenario.json, scenario.png
+  --footprints       EE height vs object footprint (Fig. "EE height boxplot") -> footprints.json, footprints.png
+
+Table I ablations are separate trainings evaluated the same way, e.g.
+  dynpush train --name no_balance --set "disabled_constraint_groups=('object_balance',)"
+  dynpush train --name no_surface --set env.sampling.reach_target_on_surface=False
+  dynpush export runs/no_balance && dynpush eval runs/no_balance/policy.onnx
+"""
+
+
+
+def _export(args: argparse.Namespace) -> int:
+    from .export import OnnxPolicy, export_policy
+
+    path = export_policy(Path(args.run), args.checkpoint, Path(args.out) if args.out else None)
+    contract = OnnxPolicy(path).contract
+    print(f"{path}: obs [1, 54] -> actions [1, 11], dynpush {contract.dynpush_version},"
+          f" training config sha256 {contract.training_config_sha256[:12]}")
+    return 0
+
+
+def _eval(args: argparse.Namespace) -> int:
+    policy = Path(args.policy)
+    overrides = tuple(args.set or ())
+    if args.scenario:
+        from .scenarios import load_scenario, run_scenario
+
+        scenario = load_scenario(Path(args.scenario))
+        out = Path(args.out) if args.out else policy.parent / f"scenario_{scenario.name}"
+        result = run_scenario(policy, scenario, out, args.noise, args.device, args.seed, overrides)
+        summary = {name: {k: row[k] for k in ("success_rate", "face_switches_per_goal")}
+                   for name, row in result["objects"].items()}
+        print(json.dumps(summary, indent=1))
+        print(f"wrote {out / 'scenario.json'} and {out / 'scenario.png'}")
+        return 0
+    if args.footprints:
+        from .evaluate import FootprintConfig, footprint_study
+
+        cfg = FootprintConfig(successful_episodes=args.footprint_episodes, num_envs=args.num_envs or 512,
+                              device=args.device, seed=args.seed, overrides=overrides)
+        out = Path(args.out) if args.out else policy.parent / "footprints"
+        result = footprint_study(policy, cfg, out)
+        for row in result["footprints"]:
+            stats = row["ee_height_in_contact_m"]
+            print(f"footprint {row['side_m']:.2f} m: {row['successful_episodes']} successful episodes,"
+                  f" median EE height in contact {stats.get('median', float('nan')):.3f} m")
+        print(f"wrote {out / 'footprints.json'} and {out / 'footprints.png'}")
+        return 0
+    from .evaluate import EvalConfig, evaluate
+
+    cfg = EvalConfig(episodes=args.episodes, num_envs=args.num_envs, noise=args.noise, device=args.device,
+                     seed=args.seed, overrides=overrides)
+    out = Path(args.out) if args.out else policy.parent / "eval"
+    result = evaluate(policy, cfg, out)
+    print(f"success {result['success_rate']:.2f} % (paper {result['paper']['success_rate']}),"
+          f" toppled {result['toppled_rate']:.2f} % (paper {result['paper']['toppled_rate']})")
+    print("violated [% of time]: " + ", ".join(f"{k} {v:.3f}" for k, v in result["constraint_violation_percent"].items()))
+    print(f"wrote {out / 'eval.json'} and {out / 'eval.png'}")
+    return 0
+
+
+def _play(args: argparse.Namespace) -> int:
+    from .play import play
+
+    policy = Path(args.policy)
+    out = Path(args.out) if args.out else policy.parent / "play.png"
+    result = play(policy, args.episodes, out, Path(args.usd) if args.usd else None, args.noise, args.seed,
+                  tuple(args.set or ()))
+    outcomes = ["success" if e["success"] else "toppled" if e["toppled"] else "failed" for e in result["episodes"]]
+    print(f"{', '.join(outcomes)}; wrote {out}" + (f" and {args.usd}" if args.usd else ""))
+    return 0
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("policy", help="policy.onnx written by dynpush export")
+    p.add_argument("--noise", action=argparse.BooleanOptionalAction, default=None,
+                   help="actor observation noise on/off (default: as in training)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--set", nargs="*", metavar="env.FIELD=VALUE", help="environment overrides, e.g. env.episode_length_s=10.0")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Adds this package's subcommands to the ``dynpush`` parser."""
+    p = subparsers.add_parser("export", help="export a run's checkpoint to ONNX with its contract (runs/NAME/policy.onnx)")
+    p.add_argument("run", help="run folder (runs/NAME with config.json and model_*.pt)")
+    p.add_argument("--checkpoint", default=None, help="checkpoint file in the run folder (default: the latest model_K.pt)")
+    p.add_argument("--out", default=None, help="output file (default: RUN/policy.onnx)")
+    p.set_defaults(func=_export)
+
+    p = subparsers.add_parser("eval", help="evaluate policy.onnx: paper Tables I/II, scenarios or the footprint study",
+                              epilog=EVAL_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    _common(p)
+    p.add_argument("--episodes", type=int, default=4096, help="first episodes to run (paper: 4096)")
+    p.add_argument("--num-envs", type=int, default=None,
+                   help="worlds simulated together (default: min(episodes, 1024); footprints: 512;"
+                        " a scenario simulates objects x trials)")
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--out", default=None, help="output folder (default: beside the policy)")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--scenario", default=None, metavar="FILE", help="scenario YAML (objects and goal sequences)")
+    mode.add_argument("--footprints", action="store_true", help="EE height vs object footprint study")
+    p.add_argument("--footprint-episodes", type=int, default=1000, help="successful episodes per footprint")
+    p.set_defaults(func=_eval)
+
+    p = subparsers.add_parser("play", help="roll out a few episodes: top-down PNG, optionally a USD animation")
+    _common(p)
+    p.add_argument("--episodes", type=int, default=4)
+    p.add_argument("--out", default=None, help="PNG file (default: play.png beside the policy)")
+    p.add_argument("--usd", default=None, help="also record the rollout as a USD animation (out.usda text, out.usdc binary)")
+    p.set_defaults(func=_play)

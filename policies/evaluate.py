@@ -42,7 +42,7 @@ import dataclasses
 import json
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
@@ -52,9 +52,10 @@ from tqdm import tqdm
 
 from dynpush.kernels.constraints import CONSTRAINT_GROUPS
 from dynpush.kernels.observations import POLICY_TERMS, PRIVILEGED_TERMS
-from dynpush.runtime.observation import quat_to_matrix
+from dynpush.runtime.observation import NUM_ARM_JOINTS, quat_to_matrix
 from dynpush.sim.config import ConfigError, PushEnvConfig
 from dynpush.sim.episode import SHAPES
+from dynpush.sim.push_env import PushEnv
 
 from .export import OnnxPolicy
 
@@ -72,6 +73,13 @@ PAPER_TABLE_II: dict[str, float] = {
     "arm_joint_velocity": 0.007, "arm_joint_torque": 0.189, "leg_joint_torque": 0.473, "collision": 0.01,
     "object_balance": 0.298,
 }
+
+
+def paper_table_i_row(training_config: dict) -> tuple[str, float, float]:
+    """The paper's Table I row (name, success %, toppled %) of the ablation a training config describes."""
+    surface = training_config["env"]["sampling"]["reach_target_on_surface"]
+    balance = "object_balance" not in training_config["disabled_constraint_groups"]
+    return PAPER_TABLE_I[(surface, balance)]
 
 
 def critic_column(name: str) -> int:
@@ -111,13 +119,6 @@ def env_config_for(policy: OnnxPolicy, num_envs: int, noise: bool | None = None,
     return cfg.env.validate()
 
 
-def make_env(env_cfg: PushEnvConfig):
-    """A PushEnv (imported here: building one compiles and captures Warp kernels)."""
-    from dynpush.sim.push_env import PushEnv
-
-    return PushEnv(env_cfg)
-
-
 def yaw_of(quat: np.ndarray) -> np.ndarray:
     """Yaw [rad] of quaternions (..., 4) stored (x, y, z, w)."""
     x, y, z, w = np.moveaxis(quat, -1, 0)
@@ -131,7 +132,7 @@ class EnvProbe:
     zero-copy view; positions in m, quaternions (x, y, z, w).
     """
 
-    def __init__(self, env):
+    def __init__(self, env: PushEnv):
         import warp as wp
 
         self.env = env
@@ -141,8 +142,8 @@ class EnvProbe:
         self.base_body = torch.as_tensor(scene.base_body, dtype=torch.long, device=self.body_q.device)
         self.object_body = torch.as_tensor(scene.object_body, dtype=torch.long, device=self.body_q.device)
         self.ee_body = torch.as_tensor(scene.ee_body, dtype=torch.long, device=self.body_q.device)
-        self.arm_q_index = torch.as_tensor(np.asarray(scene.arm_q_start)[:, None] + np.arange(5), dtype=torch.long,
-                                           device=self.body_q.device)
+        arm_q_index = np.asarray(scene.arm_q_start)[:, None] + np.arange(NUM_ARM_JOINTS)
+        self.arm_q_index = torch.as_tensor(arm_q_index, dtype=torch.long, device=self.body_q.device)
         self.ee_offset = np.asarray(scene.ee_offset, dtype=np.float64)  # in the EE body frame
 
     def _pose(self, bodies: torch.Tensor) -> np.ndarray:
@@ -202,11 +203,17 @@ class FirstEpisodes:
                                 for f in dataclasses.fields(FirstEpisodes)})
 
 
-def run_first_episodes(env, policy: OnnxPolicy, observers: list[StepObserver] = (),
-                       progress: tqdm | None = None) -> FirstEpisodes:
-    """Resets all worlds together and runs the policy for one episode length; see the module docstring."""
+def run_first_episodes(env: PushEnv, policy: OnnxPolicy, observers: list[StepObserver] = (),
+                       progress: tqdm | None = None, started: bool = False) -> FirstEpisodes:
+    """Resets all worlds together and runs the policy for one episode length; see the module docstring.
+
+    ``started``: the caller has just called ``env.reset(randomize_episode_step=False)`` itself (to read
+    the episodes before creating its observers).
+    """
     n = env.num_envs
-    obs = env.reset(randomize_episode_step=False)["policy"]
+    if not started:
+        env.reset(randomize_episode_step=False)
+    obs = env.get_observations()["policy"]
     shape = env.task.object_shape.numpy().copy()
     in_episode = torch.ones(n, dtype=torch.bool, device=env.device)
     length = torch.zeros(n, dtype=torch.long, device=env.device)
@@ -227,7 +234,7 @@ def run_first_episodes(env, policy: OnnxPolicy, observers: list[StepObserver] = 
             observer.observe(step, in_episode, continuing)
         in_episode = continuing
         if progress is not None:
-            progress.update(1)
+            progress.update(n)
     if bool(in_episode.any()):
         raise RuntimeError("a world's first episode outlasted the episode length (environment time-out broken)")
     return FirstEpisodes(length=length.cpu().numpy(), success=success.cpu().numpy(), toppled=toppled.cpu().numpy(),
@@ -237,7 +244,7 @@ def run_first_episodes(env, policy: OnnxPolicy, observers: list[StepObserver] = 
 class ConstraintObserver:
     """Counts, per world and constraint group, the first-episode steps with any column violated (> 0)."""
 
-    def __init__(self, env):
+    def __init__(self, env: PushEnv):
         self.env = env
         self.sizes = [size for _, size in env.constraint_groups]
         self.violated = torch.zeros(env.num_envs, len(self.sizes), dtype=torch.long, device=env.device)
@@ -250,7 +257,7 @@ class ConstraintObserver:
 class ContactHeightObserver:
     """Collects, per world, the end-effector height (world z, m) at every step it touches the object."""
 
-    def __init__(self, env):
+    def __init__(self, env: PushEnv):
         self.env = env
         self.probe = EnvProbe(env)
         self.heights: list[list[float]] = [[] for _ in range(env.num_envs)]
@@ -263,8 +270,9 @@ class ContactHeightObserver:
                 self.heights[w].append(float(z[w]))
 
 
-def _percent(mask: np.ndarray) -> float:
-    return 100.0 * float(mask.mean()) if mask.size else float("nan")
+def _percent(mask: np.ndarray) -> float | None:
+    """Percentage of True entries; None (JSON null) for no entries."""
+    return 100.0 * float(mask.mean()) if mask.size else None
 
 
 def _stats(values: np.ndarray) -> dict[str, float | int]:
@@ -305,11 +313,12 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
     cfg.validate()
     policy = OnnxPolicy(policy_path, batched=True)
     env_cfg = env_config_for(policy, cfg.worlds, cfg.noise, cfg.device, cfg.seed, cfg.overrides)
-    env = make_env(env_cfg)
+    env = PushEnv(env_cfg)
     rounds = math.ceil(cfg.episodes / cfg.worlds)
     parts, violated = [], []
     start = time.perf_counter()
-    with tqdm(total=rounds * env.max_episode_length, desc="eval", unit="step") as bar:
+    world_steps = rounds * cfg.worlds * env.max_episode_length
+    with tqdm(total=world_steps, desc="eval", unit="world-step", unit_scale=True) as bar:
         for _ in range(rounds):
             constraints = ConstraintObserver(env)
             parts.append(run_first_episodes(env, policy, [constraints], bar))
@@ -317,7 +326,6 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
     elapsed = time.perf_counter() - start
     episodes = FirstEpisodes.concatenate(parts, cfg.episodes)
     violated_steps = np.concatenate(violated)[: cfg.episodes]
-    world_steps = rounds * cfg.worlds * env.max_episode_length
 
     dt = env_cfg.control_dt
     violation = 100.0 * (violated_steps / episodes.length[:, None]).mean(axis=0)
@@ -328,10 +336,7 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
         by_shape[name] = {"episodes": int(mask.sum()), "success_rate": _percent(episodes.success[mask]),
                           "toppled_rate": _percent(episodes.toppled[mask]),
                           "time_to_success_s": _stats(episodes.first_success_step[mask & episodes.success] * dt)}
-    training = policy.contract.training_config
-    row = (training["env"]["sampling"]["reach_target_on_surface"],
-           "object_balance" not in training.get("disabled_constraint_groups", []))
-    paper_name, paper_success, paper_toppled = PAPER_TABLE_I[row]
+    paper_name, paper_success, paper_toppled = paper_table_i_row(policy.contract.training_config)
     result = {
         "policy": str(policy_path),
         "episodes": cfg.episodes,
@@ -350,7 +355,7 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
                    "training_config_sha256": policy.contract.training_config_sha256},
     }
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "eval.json").write_text(json.dumps(result, indent=2))
+    (out_dir / "eval.json").write_text(json.dumps(result, indent=2, allow_nan=False))
     plot_eval(result, time_to_success, out_dir / "eval.png")
     return result
 
@@ -365,8 +370,9 @@ def plot_eval(result: dict, time_to_success: np.ndarray, path: Path) -> None:
     x = np.arange(len(names))
     ours = [result["constraint_violation_percent"][n] for n in names]
     paper = [result["paper"]["constraint_violation_percent"][n] for n in names]
-    ax_constraints.bar(x - 0.2, ours, 0.4, label="this policy")
-    ax_constraints.bar(x + 0.2, paper, 0.4, label="paper (Table II)", color="tab:gray")
+    for offset, values, label, color in ((-0.2, ours, "this policy", None), (0.2, paper, "paper (Table II)", "tab:gray")):
+        drawn = ax_constraints.bar(x + offset, values, 0.4, label=label, color=color)
+        ax_constraints.bar_label(drawn, fmt="%.3g", fontsize=6)
     ax_constraints.set_xticks(x, [n.replace("_", "\n") for n in names], fontsize=8)
     ax_constraints.set_yscale("symlog", linthresh=0.01)
     ax_constraints.set_ylabel("time violated [% of episode]")
@@ -380,7 +386,7 @@ def plot_eval(result: dict, time_to_success: np.ndarray, path: Path) -> None:
     width = 0.8 / len(bars)
     x = np.arange(len(groups))
     for index, (label, source, color) in enumerate(bars):
-        values = [source["success_rate"], source["toppled_rate"]]
+        values = [np.nan if source[k] is None else source[k] for k in ("success_rate", "toppled_rate")]
         drawn = ax_rates.bar(x - 0.4 + width * (index + 0.5), values, width, label=label, color=color)
         ax_rates.bar_label(drawn, fmt="%.1f", fontsize=7)
     ax_rates.set_xticks(x, groups)
@@ -398,7 +404,9 @@ def plot_eval(result: dict, time_to_success: np.ndarray, path: Path) -> None:
     ax_time.set_xlabel("time to success [s]")
     ax_time.set_ylabel("episodes")
     ax_time.set_title("Time to success")
-    fig.suptitle(Path(result["policy"]).name)
+    noise = "on" if result["config"]["env"]["noise"]["enabled"] else "off"
+    fig.suptitle(f"{result['policy']}: {result['episodes']} episodes of {result['config']['env']['episode_length_s']:g} s,"
+                 f" observation noise {noise}")
     fig.savefig(path, dpi=110)
 
 
@@ -445,7 +453,7 @@ def footprint_study(policy_path: Path, cfg: FootprintConfig, out_dir: Path) -> d
     policy = OnnxPolicy(policy_path, batched=True)
     rows, heights = [], []
     for side in cfg.sides:
-        env = make_env(env_config_for(policy, cfg.num_envs, None, cfg.device, cfg.seed, cfg.env_overrides(side)))
+        env = PushEnv(env_config_for(policy, cfg.num_envs, None, cfg.device, cfg.seed, cfg.env_overrides(side)))
         samples: list[float] = []
         attempted = successful = 0
         with tqdm(total=cfg.successful_episodes, desc=f"footprint {side:.2f} m", unit="success") as bar:
@@ -466,7 +474,7 @@ def footprint_study(policy_path: Path, cfg: FootprintConfig, out_dir: Path) -> d
     result = {"policy": str(policy_path), "footprints": rows,
               "config": dataclasses.asdict(cfg) | {"training_config_sha256": policy.contract.training_config_sha256}}
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "footprints.json").write_text(json.dumps(result, indent=2))
+    (out_dir / "footprints.json").write_text(json.dumps(result, indent=2, allow_nan=False))
     plot_footprints(result, heights, out_dir / "footprints.png")
     return result
 
@@ -480,6 +488,8 @@ def plot_footprints(result: dict, heights: list[np.ndarray], path: Path) -> None
     rows = result["footprints"]
     labels = [f"{r['side_m']:.2f}x{r['side_m']:.2f}\n({r['successful_episodes']} ep.)" for r in rows]
     ax.boxplot([h if h.size else [np.nan] for h in heights], tick_labels=labels, showfliers=False)
+    ax.axhline(result["config"]["height"], color="gray", ls=":", label="object top")
+    ax.legend(loc="lower right", fontsize=8)
     ax.set_xlabel("object xy-footprint [m] (successful episodes)")
     ax.set_ylabel("EE height in contact, world z [m]")
     ax.set_title(f"EE height while pushing, object height {result['config']['height']} m")

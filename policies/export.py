@@ -18,7 +18,10 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
+import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import onnx
@@ -26,6 +29,11 @@ import onnxruntime
 
 from dynpush.runtime.contract import INPUT_NAME, OUTPUT_NAME, ContractError, PolicyContract
 from dynpush.runtime.observation import NUM_ACTIONS, NUM_ARM_JOINTS, POLICY_OBSERVATION_SIZE
+
+if TYPE_CHECKING:  # torch and rsl_rl are imported where needed: loading and running a policy needs neither
+    from rsl_rl.models import MLPModel
+
+    from dynpush.policies.train import TrainConfig
 
 OPSET = 18  # as rsl_rl's OnPolicyRunner.export_policy_to_onnx
 BATCH_DIM = "batch"  # symbolic batch dimension of a relaxed in-memory copy (OnnxPolicy(batched=True))
@@ -36,7 +44,7 @@ def config_sha256(config: dict) -> str:
     return hashlib.sha256(json.dumps(config, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
 
 
-def load_run_config(run_dir: Path):
+def load_run_config(run_dir: Path) -> TrainConfig:
     """The :class:`~dynpush.policies.train.TrainConfig` of a run folder (its ``config.json``)."""
     from dynpush.policies.train import TrainConfig
 
@@ -57,7 +65,7 @@ def resolve_checkpoint(run_dir: Path, checkpoint: str | None) -> Path:
     return path
 
 
-def build_actor(cfg):
+def build_actor(cfg: TrainConfig) -> MLPModel:
     """rsl_rl's actor ``MLPModel`` exactly as the training runner builds it from ``cfg.runner_cfg()``."""
     import torch
     from rsl_rl.models import MLPModel
@@ -69,7 +77,7 @@ def build_actor(cfg):
     return MLPModel(obs, runner_cfg["obs_groups"], "actor", NUM_ACTIONS, **actor_cfg)
 
 
-def load_actor(checkpoint: Path, cfg):
+def load_actor(checkpoint: Path, cfg: TrainConfig) -> MLPModel:
     """The trained actor (normaliser included) of a checkpoint, in eval mode on the CPU."""
     import torch
 
@@ -87,18 +95,15 @@ def load_actor(checkpoint: Path, cfg):
     return actor.eval()
 
 
-def build_contract(cfg) -> PolicyContract:
+def build_contract(cfg: TrainConfig) -> PolicyContract:
     """The contract of a policy trained with ``cfg`` (a TrainConfig), with the robot read from ``robot.usda``."""
     import dataclasses
     import math
-
-    import warp as wp
 
     import dynpush
     from dynpush.assets_usd import ARM_JOINT_NAMES
     from dynpush.sim.scene import build_scene
 
-    wp.config.quiet = True  # as dynpush.sim.push_env: no per-module load lines
     env = cfg.env
     robot = build_scene(1, "cpu", env.sim.ground_friction).robot
     arm = slice(0, NUM_ARM_JOINTS)
@@ -144,8 +149,17 @@ def export_policy(run_dir: Path, checkpoint: str | None = None, out: Path | None
     module = load_actor(checkpoint_path, cfg).as_onnx(verbose=False).to("cpu").eval()
     out = Path(out) if out is not None else run_dir / "policy.onnx"
     out.parent.mkdir(parents=True, exist_ok=True)
-    torch.onnx.export(module, module.get_dummy_inputs(), str(out), export_params=True, opset_version=OPSET,
-                      verbose=False, input_names=module.input_names, output_names=module.output_names)
+    # torch's exporter warns about its own internals (deprecated pytree API, optional torchvision ops).
+    registration_log = logging.getLogger("torch.onnx._internal.exporter._registration")
+    level = registration_log.level
+    registration_log.setLevel(logging.ERROR)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FutureWarning)
+            torch.onnx.export(module, module.get_dummy_inputs(), str(out), export_params=True, opset_version=OPSET,
+                              verbose=False, input_names=module.input_names, output_names=module.output_names)
+    finally:
+        registration_log.setLevel(level)
     model = onnx.load(str(out))
     contract = build_contract(cfg)
     metadata = contract.to_metadata() | {"checkpoint": checkpoint_path.name}

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
+import os
+import time
 
 import torch
 from rsl_rl.utils.logger import Logger
@@ -26,7 +29,8 @@ def iteration_summary(ep_extras: list[dict]) -> dict[str, float]:
 
 
 class ProgressLogger(Logger):
-    """Writes tensorboard exactly as rsl_rl does, and prints one line per iteration under a tqdm bar."""
+    """Writes tensorboard exactly as rsl_rl does, prints one line per iteration under a tqdm bar, and
+    appends the iteration's summary to ``progress.jsonl`` in the run folder (the learning curve)."""
 
     bar: tqdm | None = None
 
@@ -37,6 +41,9 @@ class ProgressLogger(Logger):
         summary = iteration_summary(self.ep_extras)
         with contextlib.redirect_stdout(io.StringIO()):
             super().log(it, start_it, total_it, collect_time, learn_time, **kwargs)
+        record = {"iteration": it, "time": time.time(), "collect_s": collect_time, "learn_s": learn_time, **summary}
+        with open(os.path.join(self.log_dir, "progress.jsonl"), "a") as f:
+            f.write(json.dumps(record) + "\n")
         if self.bar is None:
             self.bar = tqdm(total=total_it, initial=start_it, unit="it", dynamic_ncols=True)
         steps = self.cfg["num_steps_per_env"] * self.num_envs * self.gpu_world_size

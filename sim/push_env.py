@@ -36,7 +36,6 @@ from .episode import EpisodeSpec
 from .scene import Scene, build_scene
 
 wp.config.enable_backward = False  # halves Newton's cold kernel compile (NEWTON_NOTES.md)
-wp.config.quiet = True  # no per-module load lines on the console
 
 REWARD_TERMS = ("task", "reach", "object_velocity", "action_rate")
 CONSTRAINT_GROUPS = constraints_k.CONSTRAINT_GROUPS

@@ -1,0 +1,261 @@
+"""The simulator side of sim-to-sim: a one-world PushEnv plays the robot and the motion capture system.
+
+``dynpush sim2sim`` (``dynpush.runtime.sim2sim``) starts this module in its own process,
+``python -m dynpush.sim.sim2sim ...``, and runs the deployment runtime against it over loopback UDP
+with the runtime's own datagrams (``dynpush.runtime.packets``):
+
+- **commands in** (``DPC1``): the onboard locomotion is the tracked base, so the 6D base command and
+  the 5 arm targets become the PushEnv's actions through the policy's contract,
+  ``a_base = (u - base_command_default) / base_command_scale``, ``a_arm = (q - arm_default) /
+  arm_action_scale``. Mode stop (or no command yet): zero base command, arm targets at the measured
+  joint positions.
+- **mocap out** (``DPM1``), once per control step: base and object poses (world Z-up, m, (x, y, z, w))
+  plus Gaussian position noise (``mocap_noise_m`` std per axis) and a random rotation (rotation vector
+  with ``mocap_noise_rad`` std per axis); each frame dropped with probability ``drop`` and delivered
+  ``latency_s`` later, rounded to whole control steps.
+- **robot state out** (``DPS1``), once per control step: IMU orientation = the true base orientation,
+  the base twist in the base frame (of the base frame origin), the end-effector point in the base frame
+  (the arm's forward kinematics on hardware), arm joint positions and velocities; no leg joints.
+- **goals out** (``DPG1``): the episode's goal when it starts.
+
+Episodes: the environment the policy was trained in (``policies.evaluate.env_config_for``: the
+training config of the policy's metadata, one world, observation noise off, ``env.field=value``
+overrides). The first episode starts when the runtime reports an operating state (its start-up ramp
+is over); an episode ends at the environment's time-out, topple or fall (auto-reset inside the step)
+and succeeds if the success flag is set at its last step, as in ``dynpush eval``. Every episode is
+reported as one stdout line ``SIM2SIM {json}``; ``{"event": "done"}`` ends the run, also early when the
+runtime reports its latched STOPPED state.
+
+Clock: real time (an absolute-deadline ticker at the control rate), or lock-step (one step per command
+received, for tests).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from dynpush.policies.evaluate import EnvProbe, env_config_for
+from dynpush.policies.export import OnnxPolicy
+from dynpush.runtime.contract import PolicyContract
+from dynpush.runtime.frames import quat_multiply
+from dynpush.runtime.observation import NUM_ACTIONS, NUM_ARM_JOINTS, quat_to_matrix
+from dynpush.runtime.packets import (
+    GOAL_SET, MODE_STOP, GoalCommand, MocapBody, MocapFrame, PacketError, Proprioception, RobotCommand,
+    decode_command, encode_goal, encode_mocap, encode_state,
+)
+from dynpush.runtime.safety import State
+from dynpush.runtime.sim2sim import EVENT_PREFIX
+from dynpush.runtime.timing import RealClock, Ticker
+from dynpush.runtime.udp import UdpEndpoint
+
+from .push_env import PushEnv
+
+OPERATING_STATES = (State.PUSH, State.HOLD, State.MOCAP_LOST)
+
+
+@dataclass
+class SimToSimConfig:
+    """The simulator's side of one sim-to-sim run (ports are the runtime's, on ``runtime_host``)."""
+
+    policy: str
+    state_port: int
+    mocap_port: int
+    goal_port: int
+    runtime_host: str = "127.0.0.1"
+    episodes: int = 1
+    mocap_noise_m: float = 0.0
+    mocap_noise_rad: float = 0.0
+    latency_s: float = 0.0
+    drop: float = 0.0
+    lockstep: bool = False
+    seed: int = 0
+    base_body: str = "base"
+    object_body: str = "object"
+    overrides: list[str] = field(default_factory=list)  # env.field=value
+    command_timeout_s: float = 10.0  # lock-step: give up when the runtime is silent this long
+
+
+def check_contract_matches_env(contract: PolicyContract, env) -> None:
+    """The contract's action mapping must be the environment's (a mismatch would mistranslate commands)."""
+    cfg, arm_default = env.cfg, env.scene.robot.arm_default[:NUM_ARM_JOINTS]
+    pairs = {
+        "base_command_default": (contract.base_command_default, cfg.actions.base_default),
+        "base_command_scale": (contract.base_command_scale, cfg.actions.base_scale),
+        "arm_action_scale": ([contract.arm_action_scale], [cfg.actions.arm_scale]),
+        "arm_default_joint_positions": (contract.arm_default_joint_positions, arm_default),
+        "control_period_s": ([contract.control_period_s], [cfg.control_dt]),
+    }
+    for name, (ours, theirs) in pairs.items():
+        if not np.allclose(ours, theirs, rtol=1e-6, atol=1e-9):
+            raise ValueError(f"policy contract {name} {list(ours)} differs from the simulator's {list(theirs)}")
+
+
+def _rotation_vector_quat(v: np.ndarray) -> np.ndarray:
+    angle = float(np.linalg.norm(v))
+    if angle < 1e-12:
+        return np.array([0.0, 0.0, 0.0, 1.0])
+    return np.concatenate([v / angle * math.sin(0.5 * angle), [math.cos(0.5 * angle)]])
+
+
+class SimRobot:
+    """The PushEnv world, its datagrams and its episodes (see the module docstring)."""
+
+    def __init__(self, cfg: SimToSimConfig):
+        self.cfg = cfg
+        policy = OnnxPolicy(cfg.policy)
+        self.contract = policy.contract
+        self.env = PushEnv(env_config_for(policy, 1, noise=False, seed=cfg.seed, overrides=cfg.overrides))
+        check_contract_matches_env(self.contract, self.env)
+        self.probe = EnvProbe(self.env)
+        scene = self.env.scene
+        self._body_com = scene.model.body_com.numpy()[scene.base_body[0]].astype(np.float64)
+        self._arm_qd = scene.arm_qd_start[0] + np.arange(NUM_ARM_JOINTS)
+        self._base_body = scene.base_body[0]
+        c = self.contract
+        self._base_default = np.asarray(c.base_command_default)
+        self._base_scale = np.asarray(c.base_command_scale)
+        self._arm_default = np.asarray(c.arm_default_joint_positions)
+        self._arm_scale = c.arm_action_scale
+        self.dt = self.env.cfg.control_dt
+        self._latency_steps = int(round(cfg.latency_s / self.dt))
+        self._rng = np.random.default_rng(cfg.seed)
+        self._mocap_queue: deque[tuple[int, bytes]] = deque()
+        self.endpoint = UdpEndpoint("127.0.0.1", 0)
+        self.command: RobotCommand | None = None
+        self.malformed_commands = 0
+        self.step = 0
+        self._seq = 0
+
+    # ------------------------------------------------------------------ commands -> actions
+    def receive_commands(self) -> None:
+        for datagram in self.endpoint.drain():
+            try:
+                self.command = decode_command(datagram.data)
+            except PacketError:
+                self.malformed_commands += 1
+
+    def actions(self) -> torch.Tensor:
+        a = np.zeros(NUM_ACTIONS)
+        command = self.command
+        if command is None or command.mode == MODE_STOP:
+            a[6:] = (self.probe.arm_q()[0] - self._arm_default) / self._arm_scale
+        else:
+            a[:6] = (command.base_command - self._base_default) / self._base_scale
+            a[6:] = (command.arm_targets - self._arm_default) / self._arm_scale
+        return torch.as_tensor(a, dtype=torch.float32)[None]
+
+    # ------------------------------------------------------------------ measurements -> datagrams
+    def _runtime(self, port: int) -> tuple[str, int]:
+        return (self.cfg.runtime_host, port)
+
+    def robot_state(self) -> Proprioception:
+        base = self.probe.base()[0]
+        p_b, q_b = base[:3], base[3:]
+        R_b = quat_to_matrix(q_b)
+        qd = self.env.state_0.body_qd.numpy()[self._base_body].astype(np.float64)  # CoM velocity, angular velocity
+        v_origin = qd[:3] + np.cross(qd[3:], p_b - (p_b + R_b @ self._body_com))
+        joint_qd = self.env.state_0.joint_qd.numpy()
+        return Proprioception(
+            seq=self._seq, stamp_s=self.step * self.dt, base_quat_xyzw=q_b, base_linear_velocity_b=R_b.T @ v_origin,
+            base_angular_velocity_b=R_b.T @ qd[3:], ee_position_b=R_b.T @ (self.probe.ee_position()[0] - p_b),
+            arm_q=self.probe.arm_q()[0], arm_qd=joint_qd[self._arm_qd].astype(np.float64),
+            leg_q=np.zeros(0), leg_qd=np.zeros(0),
+        )
+
+    def _measured(self, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        position = pose[:3] + self._rng.normal(0.0, self.cfg.mocap_noise_m, 3)
+        quat = quat_multiply(pose[3:], _rotation_vector_quat(self._rng.normal(0.0, self.cfg.mocap_noise_rad, 3)))
+        return position, quat
+
+    def publish(self) -> None:
+        """Mocap (noisy, maybe dropped, delayed) then the robot state of the current step."""
+        self._seq += 1
+        if self._rng.random() >= self.cfg.drop:
+            bodies = [MocapBody(name, *self._measured(pose)) for name, pose in
+                      ((self.cfg.base_body, self.probe.base()[0]), (self.cfg.object_body, self.probe.object()[0]))]
+            frame = MocapFrame(seq=self._seq, stamp_s=self.step * self.dt, bodies=bodies)
+            self._mocap_queue.append((self.step + self._latency_steps, encode_mocap(frame)))
+        while self._mocap_queue and self._mocap_queue[0][0] <= self.step:
+            self.endpoint.send(self._mocap_queue.popleft()[1], self._runtime(self.cfg.mocap_port))
+        self.endpoint.send(encode_state(self.robot_state()), self._runtime(self.cfg.state_port))
+
+    def send_goal(self) -> None:
+        x, y = (float(v) for v in self.env.task.goal_pos.numpy()[0][:2])
+        qx, qy, qz, qw = self.env.task.goal_quat.numpy()[0].astype(np.float64)
+        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        self.endpoint.send(encode_goal(GoalCommand(seq=self._seq, kind=GOAL_SET, x=x, y=y, yaw=yaw)),
+                           self._runtime(self.cfg.goal_port))
+
+    # ------------------------------------------------------------------ the run
+    def _wait(self, ticker: Ticker | None) -> None:
+        if ticker is not None:
+            ticker.wait()
+        elif not self.endpoint.wait_readable(self.cfg.command_timeout_s):
+            raise TimeoutError(f"lock-step: no command from the runtime for {self.cfg.command_timeout_s} s")
+
+    def serve(self) -> None:
+        """Steps until ``episodes`` episodes ended; one ``SIM2SIM`` line per episode, then ``done``."""
+        env = self.env
+        emit({"event": "ready", "command_port": self.endpoint.port, "control_dt": self.dt})
+        ticker = None if self.cfg.lockstep else Ticker(RealClock(), self.dt)
+        started, episode_steps, first_success, results = False, 0, 0, 0
+        self.publish()
+        while results < self.cfg.episodes:
+            self._wait(ticker)
+            self.receive_commands()
+            if self.command is not None and self.command.state == State.STOPPED:
+                break  # latched until the runtime restarts: the remaining episodes cannot run
+            env.step(self.actions())
+            self.step += 1
+            if started:
+                episode_steps += 1
+                if first_success == 0 and int(env.success_t[0]) != 0:
+                    first_success = episode_steps
+                if int(env.reset_t[0]) != 0:
+                    results += 1
+                    timed_out, toppled = bool(env.time_out_t[0]), bool(env.episode_toppled_t[0])
+                    emit({"event": "episode", "index": results - 1, "success": int(env.episode_success_t[0]) == 1,
+                          "first_success_step": first_success, "steps": episode_steps, "toppled": toppled,
+                          "fallen": not (timed_out or toppled)})
+                    episode_steps, first_success = 0, 0
+                    if results < self.cfg.episodes:
+                        self.send_goal()
+            elif self.command is not None and self.command.state in OPERATING_STATES:
+                env.reset()
+                started = True
+                self.send_goal()
+            self.publish()
+        emit({"event": "done", "steps": self.step, "episodes": results, "runtime_stopped": results < self.cfg.episodes,
+              "malformed_commands": self.malformed_commands})
+
+    def close(self) -> None:
+        self.endpoint.close()
+
+
+def emit(event: dict) -> None:
+    print(EVENT_PREFIX + json.dumps(event), flush=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m dynpush.sim.sim2sim", description=__doc__.split("\n")[0])
+    parser.add_argument("--config", required=True, help="SimToSimConfig as JSON")
+    cfg = SimToSimConfig(**json.loads(parser.parse_args(argv).config))
+    torch.set_num_threads(1)
+    robot = SimRobot(cfg)
+    try:
+        robot.serve()
+    finally:
+        robot.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

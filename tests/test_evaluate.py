@@ -1,0 +1,171 @@
+"""dynpush eval / play: Tables I-II evaluation, scenario files and face switches, footprint study, rollout pictures."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+import yaml
+
+from dynpush.cli import main
+from dynpush.policies.evaluate import EvalConfig, FootprintConfig, evaluate, footprint_study, paper_table_i_row
+from dynpush.policies.export import build_actor, export_policy
+from dynpush.policies.scenarios import (FACE_NAMES, NO_FACE, contact_face, count_face_switches, load_scenario,
+                                        parse_scenario, run_scenario)
+from dynpush.policies.train import TrainConfig, apply_overrides
+from dynpush.sim.config import ConfigError
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def policy(tmp_path_factory):
+    """policy.onnx of an untrained tiny actor (evaluation mechanics do not need a good policy)."""
+    run = tmp_path_factory.mktemp("run")
+    cfg = apply_overrides(TrainConfig.preset_config("cpu"), ["network.actor_hidden=(16, 16)"])
+    (run / "config.json").write_text(json.dumps(cfg.to_dict()))
+    torch.manual_seed(0)
+    torch.save({"actor_state_dict": build_actor(cfg).state_dict()}, run / "model_0.pt")
+    return export_policy(run)
+
+
+def is_png(path) -> bool:
+    return path.read_bytes()[:8] == PNG_SIGNATURE
+
+
+def test_eval_writes_tables_json_and_png(policy, tmp_path):
+    cfg = EvalConfig(episodes=12, num_envs=8, overrides=("env.episode_length_s=0.4",))
+    result = evaluate(policy, cfg, tmp_path)
+    saved = json.loads((tmp_path / "eval.json").read_text())
+    assert saved == json.loads(json.dumps(result))
+    for key in ("success_rate", "toppled_rate", "reached_rate", "constraint_violation_percent", "time_to_success_s",
+                "by_shape", "episodes", "paper", "runtime", "config"):
+        assert key in saved
+    assert saved["episodes"] == 12 and saved["runtime"]["rounds"] == 2
+    assert sum(s["episodes"] for s in saved["by_shape"].values()) == 12
+    assert set(saved["by_shape"]) == {"cuboid", "cylinder"}
+    assert saved["paper"]["table_I_row"] == "Ours (with all the above)"
+    assert all(0.0 <= v <= 100.0 for v in saved["constraint_violation_percent"].values())
+    assert saved["episode_length_s"]["max"] <= 0.4 + 1e-9
+    assert saved["config"]["env"]["randomize_first_episode_length"] is False
+    assert is_png(tmp_path / "eval.png")
+
+
+def test_eval_counts_only_each_worlds_first_episode(policy, tmp_path):
+    """Robots 'fall' at once (base below 1 m): every first episode lasts one step, later episodes are masked."""
+    cfg = EvalConfig(episodes=4, num_envs=4, noise=False,
+                     overrides=("env.episode_length_s=0.2", "env.terminations.base_min_height=1.0"))
+    result = evaluate(policy, cfg, tmp_path)
+    assert result["episode_length_s"]["max"] == pytest.approx(0.02)
+    assert all(v in (0.0, 100.0) for v in result["constraint_violation_percent"].values())  # over one step
+    assert result["success_rate"] == 0.0 and result["toppled_rate"] == 0.0
+    assert result["config"]["env"]["noise"]["enabled"] is False
+    with pytest.raises(ConfigError, match="env.field=value"):
+        evaluate(policy, EvalConfig(episodes=4, overrides=("iterations=3",)), tmp_path)
+
+
+def test_paper_row_follows_the_ablation_of_the_training_config():
+    cfg = apply_overrides(TrainConfig(), ["env.sampling.reach_target_on_surface=False",
+                                          "disabled_constraint_groups=('object_balance',)"])
+    assert paper_table_i_row(cfg.to_dict())[1:] == (88.70, 7.73)
+    assert paper_table_i_row(TrainConfig().to_dict())[1:] == (91.35, 3.46)
+
+
+def test_face_of_the_end_effector_on_a_cuboid():
+    dims = np.tile([0.6, 0.4, 0.5], (5, 1))
+    ee_o = np.array([[0.35, 0.05, 0.0], [-0.33, 0.1, 0.1], [0.1, 0.25, 0.0], [0.2, -0.24, -0.2], [0.0, 0.0, 0.3]])
+    assert [FACE_NAMES[f] if f != NO_FACE else None for f in contact_face(ee_o, dims)] == ["+x", "-x", "+y", "-y", None]
+
+
+def test_face_switches_of_a_hand_made_contact_sequence():
+    x_pos, x_neg, y_pos = (FACE_NAMES.index(n) for n in ("+x", "-x", "+y"))
+    gap = NO_FACE
+    faces = ([x_pos] * 5 + [gap] * 3 + [x_pos] * 4  # one face, broken contact: no switch
+             + [y_pos] * 2 + [gap] + [y_pos] * 2  # grazing +y, never held 3 steps: no switch
+             + [x_pos] * 2 + [x_neg] * 3  # to -x: switch 1
+             + [gap] * 10 + [x_pos] * 3)  # back to +x after a gap: switch 2
+    assert count_face_switches(faces, hold_steps=3) == 2
+    assert count_face_switches(faces, hold_steps=1) == 4  # +x, +y, +x, -x, +x
+    assert count_face_switches([gap] * 5, hold_steps=1) == 0
+
+
+def valid_scenario() -> dict:
+    return {"name": "t", "trials": 1, "goal_timeout_s": 0.1, "objects": [
+        {"name": "box", "shape": "cuboid", "size": [0.5, 0.4, 0.6], "mass": 5.0, "friction": 0.8,
+         "goals": [{"position": [0.0, 0.0]}, {"position": [0.0, 0.0], "yaw_change_deg": 0},
+                   {"position": [1.5, 0.0], "yaw_change_deg": 90}]},
+        {"name": "can", "shape": "cylinder", "size": [0.3, 0.4], "mass": 2.0, "friction": 0.8,
+         "goals": [{"position": [1.0, 1.0]}], "paper": {"success_rate": 83.3}}]}
+
+
+@pytest.mark.parametrize("edit, field", [
+    (lambda d: d["objects"][0].update(mass=-1.0), r"t\.objects\[0\]\.mass"),
+    (lambda d: d["objects"][0].update(sise=[1, 1, 1]), r"t\.objects\[0\]\.sise is not a known field"),
+    (lambda d: d["objects"][1].update(size=[0.3, 0.3, 0.4]), r"t\.objects\[1\]\.size of a cylinder must be 2 lengths"),
+    (lambda d: d["objects"][0]["goals"][1].update(position=[1.0]), r"t\.objects\[0\]\.goals\[1\]\.position"),
+    (lambda d: d["objects"][0].update(shape="sphere"), r"t\.objects\[0\]\.shape must be one of"),
+    (lambda d: d["objects"][0].pop("friction"), r"t\.objects\[0\]\.friction is required"),
+    (lambda d: d.update(trials=2.5), r"t\.trials must be an integer"),
+    (lambda d: d["objects"][1].update(name="box"), r"t\.objects\[\]\.name must be unique"),
+    (lambda d: d["objects"][1]["paper"].update(success=1), r"t\.objects\[1\]\.paper\.success is not a known field"),
+])
+def test_scenario_errors_name_the_field(edit, field):
+    data = valid_scenario()
+    edit(data)
+    with pytest.raises(ConfigError, match=field):
+        parse_scenario(data, where="t")
+
+
+def test_example_scenario_files_are_valid():
+    from pathlib import Path
+
+    files = sorted((Path(__file__).parents[1] / "scenarios").glob("*.yaml"))
+    assert files
+    for path in files:
+        scenario = load_scenario(path)
+        assert scenario.objects and all(o.goals for o in scenario.objects)
+
+
+def test_scenario_runs_goal_sequences(policy, tmp_path):
+    """Goals at the object's own pose succeed at once and the next goal follows; an unreachable one times out."""
+    path = tmp_path / "t.yaml"
+    path.write_text(yaml.safe_dump(valid_scenario()))
+    result = run_scenario(policy, load_scenario(path), tmp_path, noise=False)
+    box = [(g["goal"], g["outcome"]) for g in result["goals"] if g["object"] == "box"]
+    assert box == [(0, "success"), (1, "success"), (2, "timeout")]
+    assert result["goals"][0]["time_s"] == pytest.approx(0.02)
+    assert result["objects"]["box"]["success_rate"] == pytest.approx(200 / 3)
+    assert result["objects"]["box"]["face_switches_per_goal"] == 0.0
+    assert result["objects"]["can"]["face_switches_per_goal"] is None
+    assert result["objects"]["can"]["outcomes"]["timeout"] == 1
+    assert is_png(tmp_path / "scenario.png") and (tmp_path / "scenario.json").exists()
+
+
+def test_footprint_study_on_a_tiny_setting(policy, tmp_path):
+    """Goal at the object's start pose: every episode succeeds, so the study completes."""
+    cfg = FootprintConfig(sides=(0.3, 0.6), successful_episodes=3, max_rounds=2, num_envs=2,
+                          overrides=("env.episode_length_s=0.2", "env.sampling.goal_radius=(0.0, 0.0)",
+                                     "env.sampling.object_yaw=(0.0, 0.0)", "env.sampling.goal_yaw=(0.0, 0.0)"))
+    result = footprint_study(policy, cfg, tmp_path)
+    rows = result["footprints"]
+    assert [r["side_m"] for r in rows] == [0.3, 0.6]
+    assert all(r["successful_episodes"] == 3 and r["episodes"] == 4 for r in rows)
+    assert "count" in rows[0]["ee_height_in_contact_m"]
+    assert json.loads((tmp_path / "footprints.json").read_text())["config"]["sides"] == [0.3, 0.6]
+    assert is_png(tmp_path / "footprints.png")
+
+
+def test_play_writes_a_picture_and_a_usd_animation(policy, tmp_path):
+    from pxr import Usd, UsdGeom
+
+    png, usd = tmp_path / "play.png", tmp_path / "play.usda"
+    assert main(["play", str(policy), "--episodes", "2", "--out", str(png), "--usd", str(usd),
+                 "--set", "env.episode_length_s=0.2"]) == 0
+    assert is_png(png)
+    rows = json.loads(png.with_suffix(".json").read_text())["episodes"]
+    assert len(rows) == 2 and all(r["length_s"] <= 0.2 + 1e-9 for r in rows)
+    stage = Usd.Stage.Open(str(usd))
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z
+    assert stage.GetEndTimeCode() == 10  # 0.2 s at 50 frames per second
+    animated = [a for p in stage.Traverse() for a in p.GetAttributes() if a.GetNumTimeSamples() > 1]
+    assert animated

@@ -1,0 +1,131 @@
+"""dynpush export: ONNX parity with the torch actor, graph checks, metadata contract, loader errors, warp-nn."""
+
+import json
+
+import numpy as np
+import onnx
+import pytest
+import torch
+from tensordict import TensorDict
+
+from dynpush.assets_usd import ARM_JOINT_NAMES
+from dynpush.cli import main
+from dynpush.policies.export import (OnnxPolicy, build_contract, config_sha256, export_policy, load_actor,
+                                     load_run_config, read_metadata)
+from dynpush.policies.train import TrainConfig, apply_overrides, train
+from dynpush.runtime.contract import ContractError, PolicyContract
+
+
+def tiny_run(run_dir):
+    """A run trained for one iteration on 8 worlds with tiny networks (the normaliser has seen data)."""
+    cfg = apply_overrides(TrainConfig.preset_config("cpu"), [
+        "env.num_envs=8", "iterations=1", "num_steps_per_env=6", "save_interval=1",
+        "network.actor_hidden=(32, 16)", "network.critic_hidden=(16, 16)"])
+    torch.manual_seed(0)
+    train(cfg, run_dir)
+    return run_dir
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    run = tiny_run(tmp_path_factory.mktemp("run"))
+    return run, export_policy(run)
+
+
+def observations(actor, count: int, seed: int) -> np.ndarray:
+    """Random observations around the normaliser's statistics, plus uniform ones in [-3, 3]."""
+    rng = np.random.default_rng(seed)
+    mean = actor.obs_normalizer.mean.numpy()
+    std = actor.obs_normalizer.std.numpy()
+    around = mean + std * rng.standard_normal((count, mean.size))
+    uniform = rng.uniform(-3.0, 3.0, (count, mean.size))
+    return np.concatenate([around, uniform]).astype(np.float32)
+
+
+def torch_actions(actor, obs: np.ndarray) -> np.ndarray:
+    with torch.no_grad():
+        return actor(TensorDict({"policy": torch.from_numpy(obs)}, batch_size=[len(obs)])).numpy()
+
+
+def test_onnx_equals_torch_actor_with_normaliser(exported):
+    run, path = exported
+    actor = load_actor(run / "model_0.pt", load_run_config(run))
+    assert int(actor.obs_normalizer.count) > 0, "the tiny run's normaliser must have been updated"
+    obs = observations(actor, 32, seed=1)
+    expected = torch_actions(actor, obs)
+    single = OnnxPolicy(path)
+    batched = OnnxPolicy(path, batched=True)
+    one_by_one = np.concatenate([single(o[None]) for o in obs])
+    assert np.abs(one_by_one - expected).max() < 1e-5
+    assert np.abs(batched(obs) - expected).max() < 1e-5
+    assert np.array_equal(single(obs[:1]), single(obs[:1]))  # deterministic mean, no sampling
+
+
+def test_graph_passes_checker_with_contract_shapes(exported):
+    _, path = exported
+    model = onnx.load(str(path))
+    onnx.checker.check_model(model, full_check=True)
+    opset = next(o.version for o in model.opset_import if o.domain in ("", "ai.onnx"))
+    assert opset >= 17
+    dims = lambda v: [d.dim_value for d in v.type.tensor_type.shape.dim]  # noqa: E731
+    assert [(v.name, dims(v)) for v in model.graph.input] == [("obs", [1, 54])]
+    assert [(v.name, dims(v)) for v in model.graph.output] == [("actions", [1, 11])]
+    ops = {node.op_type for node in model.graph.node}
+    assert {"Sub", "Div"} <= ops  # the empirical normaliser is in the graph
+    assert not any("Random" in op for op in ops)
+
+
+def test_metadata_round_trips_through_the_contract(exported):
+    run, path = exported
+    contract = PolicyContract.from_metadata(read_metadata(onnx.load(str(path))))
+    cfg = load_run_config(run)
+    assert contract == build_contract(cfg)
+    assert contract.arm_joint_names == list(ARM_JOINT_NAMES[:5]) and contract.frozen_joint_name == "WRIST_2"
+    assert contract.training_config == json.loads((run / "config.json").read_text())
+    assert contract.training_config_sha256 == config_sha256(contract.training_config)
+    assert TrainConfig.from_dict(contract.training_config) == cfg
+    assert contract.action_clip == cfg.env.actions.clip and contract.control_period_s == cfg.env.control_dt
+    assert contract.observation_noise["base_angular_velocity_b"] == cfg.env.noise.base_angular_velocity_b
+    lower, upper = np.array(contract.arm_joint_lower), np.array(contract.arm_joint_upper)
+    assert np.all(lower < np.array(contract.arm_default_joint_positions)) and np.all(lower < upper)
+
+
+def test_loader_rejects_wrong_inputs_and_foreign_files(exported, tmp_path):
+    _, path = exported
+    policy = OnnxPolicy(path)
+    with pytest.raises(ValueError, match=r"'obs' must have shape \[1, 54\].*got \[1, 50\]"):
+        policy(np.zeros((1, 50), np.float32))
+    with pytest.raises(ValueError, match=r"got \[4, 54\]"):
+        policy(np.zeros((4, 54), np.float32))
+    with pytest.raises(ValueError, match="float32"):
+        policy(np.zeros((1, 54)))
+    assert OnnxPolicy(path, batched=True)(np.zeros((7, 54), np.float32)).shape == (7, 11)
+    model = onnx.load(str(path))
+    del model.metadata_props[:]
+    onnx.save(model, str(tmp_path / "bare.onnx"))
+    with pytest.raises(ContractError, match="observation_layout"):
+        OnnxPolicy(tmp_path / "bare.onnx")
+
+
+def test_cli_export_of_a_chosen_checkpoint(exported, tmp_path):
+    run, _ = exported
+    out = tmp_path / "chosen.onnx"
+    assert main(["export", str(run), "--checkpoint", "model_0.pt", "--out", str(out)]) == 0
+    assert read_metadata(onnx.load(str(out)))["checkpoint"] == "model_0.pt"
+    with pytest.raises(FileNotFoundError, match="model_7.pt"):
+        export_policy(run, "model_7.pt", tmp_path / "missing.onnx")
+
+
+def test_the_same_file_runs_in_warp_nn(exported):
+    """warp-nn is the ONNX runtime of Newton's examples (``pip install newton[onnx]``)."""
+    pytest.importorskip("warp_nn")
+    import warp as wp
+    from warp_nn.runtime import OnnxRuntime
+
+    run, path = exported
+    actor = load_actor(run / "model_0.pt", load_run_config(run))
+    obs = observations(actor, 4, seed=2)
+    runtime = OnnxRuntime(str(path), device="cpu")
+    for o in obs:
+        actions = runtime({"obs": wp.array(o[None], dtype=wp.float32, device="cpu")})["actions"].numpy()
+        assert np.abs(actions - torch_actions(actor, o[None])).max() < 1e-5

@@ -32,8 +32,14 @@ def _env_info(args: argparse.Namespace) -> int:
 
 
 def _train(args: argparse.Namespace) -> int:
-    from dynpush.policies.train import TrainConfig, apply_overrides, train
+    from dynpush.policies.train import TrainConfig, apply_overrides, launch_processes, train
 
+    if args.procs > 1:  # re-run this command under torchrun, one process per shard
+        argv = sys.argv[sys.argv.index("train") + 1 :]
+        drop = [i for i, a in enumerate(argv) if a == "--procs" or a.startswith("--procs=")]
+        for i in reversed(drop):
+            del argv[i : i + (1 if "=" in argv[i] else 2)]
+        return launch_processes(args.procs, argv)
     cfg = apply_overrides(TrainConfig.preset_config(args.preset), args.set or [])
     name = args.name or f"{args.preset}"
     train(cfg, Path(args.runs) / name, resume=args.resume)
@@ -55,6 +61,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--name", default=None, help="run name (default: the preset)")
     p.add_argument("--runs", default="runs", help="folder of the runs")
     p.add_argument("--resume", action="store_true", help="continue the run from its latest checkpoint")
+    p.add_argument("--procs", type=int, default=1,
+                   help="processes on this machine (torchrun, gloo on CPU / NCCL on GPUs); env.num_envs is split")
     p.add_argument("--set", nargs="*", metavar="FIELD=VALUE", help="override config fields, e.g. env.num_envs=256 iterations=100")
     p.set_defaults(func=_train)
 

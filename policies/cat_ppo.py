@@ -76,11 +76,10 @@ class CaTPPO(PPO):
         self.p_max = p_max.to(self.device, torch.float)
 
     def reduce_batch_max(self, batch_max: torch.Tensor) -> torch.Tensor:
-        """Combine the per-column batch maxima of all processes.
-
-        Hook for multi-process training: all-reducing ``batch_max`` with ``ReduceOp.MAX`` here keeps ``c_max``
-        identical on every rank. In a single process the batch maximum is returned unchanged.
-        """
+        """Combine the per-column batch maxima of all processes (all-reduce MAX), so ``c_max`` stays
+        identical on every rank of a distributed run; unchanged in a single process."""
+        if self.is_multi_gpu:
+            torch.distributed.all_reduce(batch_max, op=torch.distributed.ReduceOp.MAX)
         return batch_max
 
     def termination_probability(self, constraints: torch.Tensor) -> torch.Tensor:

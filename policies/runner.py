@@ -91,8 +91,26 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         torch.save(state, path)
         return path
 
-    def load(self, path: str, load_cfg: dict | None = None, strict: bool = True, map_location: str | None = None) -> dict:
-        """Load a checkpoint; restores the environment and the RNG too when the checkpoint has them."""
+    def _configure_multi_gpu(self) -> None:
+        """rsl_rl's multi-GPU set-up (NCCL), extended to CPU processes with the gloo backend."""
+        if int(os.getenv("WORLD_SIZE", "1")) == 1 or str(self.device).startswith("cuda"):
+            super()._configure_multi_gpu()
+            return
+        self.gpu_world_size = int(os.environ["WORLD_SIZE"])
+        self.gpu_local_rank = int(os.getenv("LOCAL_RANK", "0"))
+        self.gpu_global_rank = int(os.getenv("RANK", "0"))
+        self.is_distributed = True
+        self.cfg["multi_gpu"] = {"global_rank": self.gpu_global_rank, "local_rank": self.gpu_local_rank,
+                                 "world_size": self.gpu_world_size}
+        if not torch.distributed.is_initialized():
+            torch.distributed.init_process_group(backend="gloo", rank=self.gpu_global_rank, world_size=self.gpu_world_size)
+
+    def load(
+        self, path: str, load_cfg: dict | None = None, strict: bool = True, map_location: str | None = None,
+        restore_env: bool = True,
+    ) -> dict:
+        """Load a checkpoint; restores the RNG, and the environment unless ``restore_env`` is False (a run
+        resumed with another number of processes starts fresh episodes)."""
         try:
             loaded = torch.load(path, weights_only=False, map_location=map_location)
         except Exception as error:  # a truncated or foreign file
@@ -103,7 +121,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         if self.alg.load(loaded, load_cfg, strict):
             self.current_learning_iteration = loaded["iter"]
         infos = loaded.get("infos") or {}
-        if "env_state" in infos:
+        if restore_env and "env_state" in infos:
             self.env.load_state_dict(infos["env_state"])
         if "torch_rng" in infos:
             torch.set_rng_state(infos["torch_rng"])

@@ -10,6 +10,7 @@ from __future__ import annotations
 import ast
 import dataclasses
 import json
+import os
 import signal
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -168,27 +169,54 @@ def latest_checkpoint(run_dir: Path) -> Path | None:
     return checkpoints[-1] if checkpoints else None
 
 
+@dataclass
+class ProcessGroup:
+    """This process's place in a torchrun launch (``RANK``, ``WORLD_SIZE``); one process otherwise."""
+
+    rank: int = 0
+    world_size: int = 1
+
+    @staticmethod
+    def from_environment() -> ProcessGroup:
+        return ProcessGroup(rank=int(os.getenv("RANK", "0")), world_size=int(os.getenv("WORLD_SIZE", "1")))
+
+    def shard(self, env: PushEnvConfig) -> PushEnvConfig:
+        """This rank's environment: ``env.num_envs`` worlds in all, split evenly; a seed per rank."""
+        if env.num_envs % self.world_size:
+            raise ConfigError(f"env.num_envs ({env.num_envs}) must be divisible by the number of processes ({self.world_size})")
+        return dataclasses.replace(env, num_envs=env.num_envs // self.world_size, seed=env.seed + self.rank)
+
+
 def train(cfg: TrainConfig, run_dir: Path, resume: bool = False) -> CaTOnPolicyRunner:
-    """Trains (or resumes) a push policy into ``run_dir``; saves on Ctrl-C / SIGTERM."""
+    """Trains (or resumes) a push policy into ``run_dir``; saves on Ctrl-C / SIGTERM.
+
+    Under torchrun every process runs one shard of ``cfg.env.num_envs`` worlds; gradients and
+    normaliser statistics are averaged across processes (rsl_rl), rank 0 logs and saves.
+    """
     from dynpush.sim.push_env import PushEnv
 
-    run_dir.mkdir(parents=True, exist_ok=True)
+    group = ProcessGroup.from_environment()
     config_path = run_dir / "config.json"
     if resume:
         if not config_path.exists():
             raise FileNotFoundError(f"--resume: no {config_path}; start the run without --resume first")
         cfg = TrainConfig.from_dict(json.loads(config_path.read_text()))
     cfg.validate()
-    config_path.write_text(json.dumps(cfg.to_dict(), indent=2))
+    if group.rank == 0:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        config_path.write_text(json.dumps(cfg.to_dict(), indent=2))
+    if cfg.env.device == "cpu":
+        torch.set_num_threads(1)  # one core per process: Warp launches already use one
 
-    torch.manual_seed(cfg.env.seed)
-    env = PushEnv(cfg.env)
-    runner = CaTOnPolicyRunner(env, cfg.runner_cfg(), log_dir=str(run_dir), device=cfg.env.device)
+    torch.manual_seed(cfg.env.seed + group.rank)
+    env = PushEnv(group.shard(cfg.env))
+    log_dir = str(run_dir) if group.rank == 0 else None
+    runner = CaTOnPolicyRunner(env, cfg.runner_cfg(), log_dir=log_dir, device=env.device)
     if resume:
         checkpoint = latest_checkpoint(run_dir)
         if checkpoint is None:
             raise FileNotFoundError(f"--resume: no model_*.pt in {run_dir}")
-        runner.load(str(checkpoint))
+        runner.load(str(checkpoint), restore_env=group.world_size == 1)
     remaining = cfg.iterations - runner.current_learning_iteration
     if remaining <= 0:
         print(f"{run_dir}: all {cfg.iterations} iterations done")
@@ -201,8 +229,19 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False) -> CaTOnPolicyR
     try:
         runner.learn(remaining, total_iterations=cfg.iterations)
     except KeyboardInterrupt:
-        path = runner.save_interrupted()
-        print(f"\ninterrupted: saved {path}; continue with --resume")
+        if group.rank == 0:
+            path = runner.save_interrupted()
+            print(f"\ninterrupted: saved {path}; continue with --resume")
     finally:
         signal.signal(signal.SIGTERM, previous)
     return runner
+
+
+def launch_processes(procs: int, argv: list[str]) -> int:
+    """Re-runs ``dynpush train`` under torchrun with ``procs`` processes on this machine."""
+    import subprocess
+    import sys
+
+    command = [sys.executable, "-m", "torch.distributed.run", "--standalone", f"--nproc_per_node={procs}",
+               "-m", "dynpush", "train", *argv]
+    return subprocess.call(command)

@@ -35,11 +35,8 @@ flag: within ``success_distance`` and ``success_angle``; a goal the object alrea
 counts at once), on time-out (``goal_timeout_s``), or when the object topples
 or the robot falls. After a success or a time-out the next goal starts at once from where the object and
 the robot are: no manual repositioning, as on the hardware. A topple or fall ends the run (its remaining
-goals are not attempted). ``PushEnv.set_episodes`` always places the object at the environment origin,
-so the next goal is posed *relative to the object*: the problem is translated so that the object's
-current position is the new origin (its yaw, the robot's base position and yaw and the arm joints are
-kept); reported positions are translated back to the scenario's world frame. The re-placement starts
-every body at rest and the base at its default height, roll and pitch, and clears the action history.
+goals are not attempted). The next goal is set with ``PushEnv.set_goals``: robot, object and arm keep
+their state and velocities, only the goal and the episode clock change.
 
 **Face switches** (IV-C: "a face switch is considered when the robot switches contact to a different
 face of the cuboid"). While the end-effector touches the object (the environment's EE-object contact,
@@ -71,7 +68,7 @@ from dynpush.sim.config import ConfigError
 from dynpush.sim.episode import SHAPES, EpisodeSpec
 from dynpush.sim.push_env import PushEnv
 
-from .evaluate import EE_CONTACT_COLUMN, EnvProbe, env_config_for, yaw_of
+from .evaluate import EE_CONTACT_COLUMN, EnvProbe, env_config_for
 from .export import OnnxPolicy
 
 FACE_NAMES = ("+x", "-x", "+y", "-y")  # vertical faces of a cuboid by outward normal (object frame)
@@ -300,7 +297,6 @@ def run_scenario(policy_path: Path, scenario: Scenario, out_dir: Path, noise: bo
     goals = [obj.goal_poses() for obj in objects]
     n = len(worlds)
 
-    origin = np.zeros((n, 2))  # scenario-frame position of each world's environment origin
     goal_index = np.zeros(n, dtype=np.int64)
     goal_step = np.zeros(n, dtype=np.int64)
     done = np.zeros(n, dtype=bool)
@@ -309,32 +305,24 @@ def run_scenario(policy_path: Path, scenario: Scenario, out_dir: Path, noise: bo
     records: list[GoalRecord] = []
     paths: list[np.ndarray] = []  # (n, 2, 2) object centroid and robot base per step, scenario frame (NaN once over)
 
-    def start_goals(selected: np.ndarray, first: bool) -> None:
-        """Starts the current goal of the selected worlds (translated so the object sits at the env origin)."""
-        obj_pose, base_pose, arm_q = probe.object(), probe.base(), probe.arm_q()
+    def start_first_goals() -> None:
+        """Places every world's object at the origin and its robot on the start circle, facing it."""
         episodes = {}
-        for w in np.flatnonzero(selected):
-            obj = objects[w]
-            if first:
-                angle = 2.0 * math.pi * worlds[w][1] / scenario.trials
-                r = scenario.robot_start_radius
-                base = (r * math.cos(angle), r * math.sin(angle), angle + math.pi)
-                object_yaw, arm = math.radians(obj.start_yaw_deg), None
-            else:
-                shift = obj_pose[w, :2]
-                origin[w] += shift
-                base = (*(base_pose[w, :2] - shift), float(yaw_of(base_pose[w, 3:])))
-                object_yaw, arm = float(yaw_of(obj_pose[w, 3:])), tuple(arm_q[w])
-            gx, gy, gyaw = goals[w][goal_index[w]]
-            episodes[int(w)] = EpisodeSpec(shape=obj.shape, dims=obj.dims, mass=obj.mass, com_offset=obj.com_offset,
-                                           friction=obj.friction, object_yaw=object_yaw,
-                                           goal=(gx - origin[w, 0], gy - origin[w, 1], gyaw), base=base, arm_q=arm)
+        for w, obj in enumerate(objects):
+            angle = 2.0 * math.pi * worlds[w][1] / scenario.trials
+            r = scenario.robot_start_radius
+            episodes[w] = EpisodeSpec(shape=obj.shape, dims=obj.dims, mass=obj.mass, com_offset=obj.com_offset,
+                                      friction=obj.friction, object_yaw=math.radians(obj.start_yaw_deg),
+                                      goal=goals[w][0], base=(r * math.cos(angle), r * math.sin(angle), angle + math.pi))
         env.set_episodes(episodes)
+
+    def start_next_goals(selected: np.ndarray) -> None:
+        env.set_goals({int(w): goals[w][goal_index[w]] for w in np.flatnonzero(selected)})
         goal_step[selected] = 0
         switches_at_start[selected] = faces.switches[selected]
 
     def finish(w: int, outcome: str) -> None:
-        obj_xy = origin[w] + probe.object()[w, :2]
+        obj_xy = probe.object()[w, :2]
         gx, gy, _ = goals[w][goal_index[w]]
         records.append(GoalRecord(
             object=objects[w].name, trial=worlds[w][1], goal=int(goal_index[w]), outcome=outcome,
@@ -342,7 +330,7 @@ def run_scenario(policy_path: Path, scenario: Scenario, out_dir: Path, noise: bo
             face_switches=int(faces.switches[w] - switches_at_start[w]) if cuboid[w] else None,
             final_distance_m=float(np.hypot(obj_xy[0] - gx, obj_xy[1] - gy))))
 
-    start_goals(np.ones(n, dtype=bool), first=True)
+    start_first_goals()
     total_goals = sum(len(g) for g in goals)
     with tqdm(total=total_goals, desc=f"scenario {scenario.name}", unit="goal") as bar:
         while not done.all():
@@ -354,7 +342,7 @@ def run_scenario(policy_path: Path, scenario: Scenario, out_dir: Path, noise: bo
             success = (env.success_t != 0).cpu().numpy() & active & ~ended
             touching = (env.critic_obs_t[:, EE_CONTACT_COLUMN] > 0.5).cpu().numpy() & active & ~ended & cuboid
             faces.update(np.where(touching, contact_face(probe.ee_in_object(), dims), NO_FACE))
-            xy = origin[:, None] + np.stack([probe.object()[:, :2], probe.base()[:, :2]], axis=1)
+            xy = np.stack([probe.object()[:, :2], probe.base()[:, :2]], axis=1)
             xy[done | ended] = np.nan
             paths.append(xy)
             toppled = env.episode_toppled_t.cpu().numpy() == 1
@@ -375,7 +363,7 @@ def run_scenario(policy_path: Path, scenario: Scenario, out_dir: Path, noise: bo
                 else:
                     next_goal[w] = True
             if next_goal.any():
-                start_goals(next_goal, first=False)
+                start_next_goals(next_goal)
 
     result = summarize(scenario, records, dt)
     result["config"] = {"scenario": dataclasses.asdict(scenario), "noise": env_cfg.noise.enabled, "seed": seed,

@@ -1,9 +1,101 @@
-"""``dynpush`` subcommands of dynpush.runtime (registered by ``dynpush.cli``)."""
+"""``dynpush`` subcommands of dynpush.runtime (registered by ``dynpush.cli``): run, replay, sim2sim.
+
+Each prints one JSON document on stdout. Invalid configs, failed start-up checks and unreadable logs
+end with a message on stderr and exit status 2.
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+import signal
+import sys
+import threading
+from pathlib import Path
+
+
+def _fail(error: Exception) -> int:
+    print(f"dynpush: {error}", file=sys.stderr)
+    return 2
+
+
+def _run(args: argparse.Namespace) -> int:
+    from .app import Runtime
+    from .config import RuntimeConfigError, load_config
+    from .errors import StartupError
+
+    stop = threading.Event()
+    try:
+        runtime = Runtime(load_config(args.config), stop)
+    except (RuntimeConfigError, StartupError) as error:
+        return _fail(error)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    if args.max_seconds is not None:
+        timer = threading.Timer(args.max_seconds, stop.set)
+        timer.daemon = True
+        timer.start()
+    print(f"dynpush run: logging to {runtime.log.path}; Ctrl-C stops", file=sys.stderr)
+    print(json.dumps(runtime.run(), indent=1))
+    return 0
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from .errors import StartupError
+    from .replay import replay
+    from .tick_log import TickLogError
+
+    try:
+        report = replay(Path(args.log), args.policy)
+    except (OSError, StartupError, TickLogError) as error:
+        return _fail(error)
+    print(json.dumps(report, indent=1))
+    return 0
+
+
+def _sim2sim(args: argparse.Namespace) -> int:
+    from .config import RuntimeConfigError
+    from .errors import StartupError
+    from .sim2sim import SimToSimOptions, run_sim2sim
+
+    options = SimToSimOptions(policy=args.policy, episodes=args.episodes, mocap_noise_m=args.mocap_noise,
+                              mocap_noise_rad=args.mocap_noise_rad, latency_s=args.latency, drop=args.drop,
+                              lockstep=args.lockstep, seed=args.seed, config=args.config, overrides=args.set or [],
+                              log_dir=args.log_dir)
+    try:
+        report = run_sim2sim(options)
+    except (RuntimeConfigError, StartupError) as error:
+        return _fail(error)
+    text = json.dumps(report, indent=1)
+    if args.out:
+        Path(args.out).write_text(text)
+    print(text)
+    return 0 if report["completed"] else 1
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Adds this package's subcommands to the ``dynpush`` parser."""
+    p = subparsers.add_parser("run", help="run the deployment runtime (50 Hz loop) from a YAML config")
+    p.add_argument("config", help="runtime YAML (see configs/runtime_*.yaml)")
+    p.add_argument("--max-seconds", type=float, default=None, help="stop after this long (default: until Ctrl-C)")
+    p.set_defaults(func=_run)
+
+    p = subparsers.add_parser("replay", help="re-run the policies on a tick log's observations; largest deviation")
+    p.add_argument("log", help="tick log (.dplog) written by dynpush run or sim2sim")
+    p.add_argument("--policy", default=None, help="push policy ONNX to compare (default: the one in the log's config)")
+    p.set_defaults(func=_replay)
+
+    p = subparsers.add_parser("sim2sim", help="the runtime against the simulator over loopback UDP; success rate")
+    p.add_argument("policy", help="push policy ONNX")
+    p.add_argument("--episodes", type=int, default=10)
+    p.add_argument("--mocap-noise", type=float, default=0.0, metavar="M", help="mocap position noise std per axis [m]")
+    p.add_argument("--mocap-noise-rad", type=float, default=0.0, metavar="RAD", help="mocap rotation noise std [rad]")
+    p.add_argument("--latency", type=float, default=0.0, metavar="S", help="mocap latency [s] (whole control periods)")
+    p.add_argument("--drop", type=float, default=0.0, metavar="P", help="probability a mocap frame is lost")
+    p.add_argument("--lockstep", action="store_true", help="simulated time, one tick per simulator step (default: real time)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--config", default=None, help="runtime YAML to start from (safety limits, timeouts, ramp)")
+    p.add_argument("--set", nargs="*", metavar="env.FIELD=VALUE", help="simulator overrides, e.g. env.episode_length_s=10.0")
+    p.add_argument("--log-dir", default="runs/sim2sim", help="folder of the runtime's tick log")
+    p.add_argument("--out", default=None, help="also write the report to this JSON file")
+    p.set_defaults(func=_sim2sim)

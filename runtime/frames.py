@@ -82,9 +82,6 @@ class Pose:
         """``R`` (3, 3) with ``p_world = R @ p_body``."""
         return quat_to_matrix(self.quat_xyzw)
 
-    def is_finite(self) -> bool:
-        return bool(np.isfinite(self.position).all() and np.isfinite(self.quat_xyzw).all())
-
 
 @dataclass
 class FrameConvention:

@@ -31,9 +31,9 @@ from dynpush.kernels import (
 )
 from dynpush.kernels.views import CONTACT_COLUMNS, NUM_ACTIONS, NUM_ARM_JOINTS, NUM_CRITIC_OBS, NUM_POLICY_OBS, PushTask, RobotView
 
-from .config import PushEnvConfig
+from .config import ConfigError, PushEnvConfig
 from .episode import EpisodeSpec
-from .scene import Scene, build_scene
+from .scene import build_scene
 
 wp.config.enable_backward = False  # halves Newton's cold kernel compile (NEWTON_NOTES.md)
 
@@ -339,8 +339,7 @@ class PushEnv(VecEnv):
                                                              self.reset_flags, self.time_out, self.episode_success,
                                                              self.episode_toppled])
             self._reset_flagged()
-            self._launch(observations_k.compute_observations, [view, self.task, self.noise_scale, int(cfg.noise.enabled),
-                                                               seed, self.policy_obs, self.critic_obs])
+            self._observe()
 
     def _reset_flagged(self) -> None:
         """Draws and starts new episodes for worlds with ``reset_flags != 0`` (inside the captured step)."""
@@ -390,8 +389,33 @@ class PushEnv(VecEnv):
             self._sync_targets_and_observe()
         return self.get_observations()
 
+    def set_goals(self, goals: dict[int, tuple[float, float, float]]) -> TensorDict:
+        """Gives the given worlds a new goal (x [m], y [m], yaw [rad], world frame) and restarts their
+        episode clock, leaving robot and object where they are (goal sequences). Returns the
+        observations of all worlds."""
+        for w, goal in goals.items():
+            if not 0 <= w < self.num_envs:
+                raise IndexError(f"world index must lie in [0, {self.num_envs}), got {w}")
+            if len(goal) != 3 or not all(math.isfinite(v) for v in goal):
+                raise ConfigError(f"goal of world {w} must be 3 finite numbers (x, y, yaw), got {goal!r}")
+        with wp.ScopedDevice(self.wp_device):
+            position, quat = self.task.goal_pos.numpy(), self.task.goal_quat.numpy()
+            steps, height = self.task.episode_step.numpy(), self.task.object_dims.numpy()[:, 2]
+            for w, (x, y, yaw) in goals.items():
+                position[w] = (x, y, 0.5 * height[w])
+                quat[w] = (0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw))
+                steps[w] = 0
+            self.task.goal_pos.assign(position)
+            self.task.goal_quat.assign(quat)
+            self.task.episode_step.assign(steps)
+            self._observe()
+        return self.get_observations()
+
     def _sync_targets_and_observe(self) -> None:
         self.control.joint_target_q.assign(self.state_0.joint_q)
+        self._observe()
+
+    def _observe(self) -> None:
         self._launch(observations_k.compute_observations, [self.views[0], self.task, self.noise_scale,
                                                            int(self.cfg.noise.enabled), self.cfg.seed,
                                                            self.policy_obs, self.critic_obs])

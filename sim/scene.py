@@ -20,6 +20,8 @@ from dynpush.kernels.contacts import ROLE_EE, ROLE_NONE, ROLE_OBJECT, ROLE_ROBOT
 
 from .leg_statics import leg_torque_map
 
+wp.config.log_level = wp.LOG_WARNING  # no per-module "load on device" lines on the console
+
 # Collision columns (paper Table "Rewards and constraints", 18): object vs each of these robot parts ...
 OBJECT_COLLISION_PARTS = ("base_collision", *LEG_SHAPE_NAMES, "shoulder", "upper_arm", "elbow", "forearm")
 # ... then self-collisions of these arm links with the base or legs.

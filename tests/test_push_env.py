@@ -5,7 +5,6 @@ import math
 import numpy as np
 import pytest
 import torch
-import warp as wp
 
 from dynpush.sim.config import ConfigError, PushEnvConfig, RandomizationConfig, SimConfig
 from dynpush.sim.episode import EpisodeSpec
@@ -116,3 +115,19 @@ def test_invalid_episode_names_the_field(small_env):
         small_env.set_episodes({0: EpisodeSpec(dims=(0.5, -0.5, 0.7))})
     with pytest.raises(IndexError, match="world index"):
         small_env.set_episodes({7: EpisodeSpec()})
+
+
+def test_set_goals_keeps_the_bodies_and_restarts_the_clock(small_env):
+    env = small_env
+    env.set_episodes({w: EpisodeSpec(base=(-2.2, 0.0, 0.0)) for w in range(4)})
+    for _ in range(5):
+        env.step(torch.zeros(4, 11))
+    bodies = env.state_0.body_q.numpy().copy()
+    obs = env.set_goals({1: (0.0, 0.0, 0.0)})  # the object, at rest at the origin, meets this goal
+    np.testing.assert_array_equal(env.state_0.body_q.numpy(), bodies)
+    assert env.episode_length_buf.tolist() == [5, 0, 5, 5]
+    np.testing.assert_allclose(obs["critic"][1, 31:34].numpy(), 0.0, atol=0.01)  # object-to-goal in the base frame
+    env.step(torch.zeros(4, 11))
+    assert env.success_t.tolist()[1] == 1
+    with pytest.raises(ConfigError, match="goal of world 0"):
+        env.set_goals({0: (0.0, float("nan"), 0.0)})

@@ -1,6 +1,5 @@
 """dynpush train: config overrides, exact resume, interrupted runs, corrupted checkpoints."""
 
-import json
 
 import pytest
 import torch

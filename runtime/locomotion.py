@@ -1,0 +1,68 @@
+"""A learned locomotion policy run by the runtime: 6D base command -> 12 leg joint position targets.
+
+Used with ``locomotion.mode: onnx``. The observation is the concatenation of ``scale * term`` for
+the configured terms (``config.LOCOMOTION_TERMS``), all from the robot state (state estimator and
+IMU, never mocap, so locomotion keeps standing when mocap is lost):
+
+- ``base_linear_velocity_b`` (3) [m/s], ``base_angular_velocity_b`` (3) [rad/s]: base frame
+- ``projected_gravity_b`` (3): ``R_imu^T (0, 0, -1)``
+- ``base_command`` (6): the absolute command (vx, vy, yaw rate, roll, pitch, height)
+- ``leg_joint_position`` (12): ``q_leg - default_joint_positions`` [rad]; ``leg_joint_velocity`` (12)
+- ``last_leg_actions`` (12): the previous network output
+- ``arm_joint_position`` (5): ``q_arm - arm default`` (policy contract) [rad]; ``arm_joint_velocity`` (5)
+
+Leg targets = ``default_joint_positions + action_scale * output``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .config import LOCOMOTION_TERMS, NUM_LEG_JOINTS, OnnxLocomotionConfig
+from .contract import PolicyContract
+from .observation import quat_to_matrix
+from .packets import Proprioception
+from .policy import OnnxModel
+
+_GRAVITY = np.array([0.0, 0.0, -1.0])
+
+
+class OnnxLocomotion:
+    def __init__(self, cfg: OnnxLocomotionConfig, contract: PolicyContract):
+        self.model = OnnxModel(cfg.path, cfg.input_name, cfg.observation_size, cfg.output_name, NUM_LEG_JOINTS,
+                               "locomotion.onnx")
+        self._terms = []
+        start = 0
+        for term in cfg.observation:
+            size = LOCOMOTION_TERMS[term.name]
+            self._terms.append((term.name, term.scale, slice(start, start + size)))
+            start += size
+        self.default_joint_positions = np.asarray(cfg.default_joint_positions, dtype=np.float64)
+        self._scale = cfg.action_scale
+        self._arm_default = np.asarray(contract.arm_default_joint_positions, dtype=np.float64)
+        self.last_actions = np.zeros(NUM_LEG_JOINTS)
+
+    def _term(self, name: str, state: Proprioception, base_command: np.ndarray) -> np.ndarray:
+        if name == "projected_gravity_b":
+            return quat_to_matrix(state.base_quat_xyzw).T @ _GRAVITY
+        if name == "leg_joint_position":
+            return state.leg_q - self.default_joint_positions
+        if name == "arm_joint_position":
+            return state.arm_q - self._arm_default
+        return {
+            "base_linear_velocity_b": state.base_linear_velocity_b,
+            "base_angular_velocity_b": state.base_angular_velocity_b,
+            "base_command": base_command,
+            "leg_joint_velocity": state.leg_qd,
+            "last_leg_actions": self.last_actions,
+            "arm_joint_velocity": state.arm_qd,
+        }[name]
+
+    def step(self, state: Proprioception, base_command: np.ndarray) -> np.ndarray:
+        """Leg joint targets (12) [rad] for ``base_command``; the observation stays in ``model.input``."""
+        observation = self.model.input[0]
+        for name, scale, columns in self._terms:
+            observation[columns] = scale * self._term(name, state, base_command)
+        actions = self.model.run()
+        self.last_actions = actions.astype(np.float64)
+        return self.default_joint_positions + self._scale * self.last_actions

@@ -1,0 +1,208 @@
+"""Safety state machine transitions (stale mocap, stale robot state, NaN, attitude, success, new goal), the
+controller's outputs in each state (ramp, hold, clamping, stop), a locomotion ONNX, and frame conversion."""
+
+import math
+
+import numpy as np
+import pytest
+
+from dynpush.runtime.config import config_from_dict
+from dynpush.runtime.controller import Controller
+from dynpush.runtime.frames import BodyOffset, FrameConvention, Pose, PoseConverter, yaw_quat
+from dynpush.runtime.goals import Goal
+from dynpush.runtime.locomotion import OnnxLocomotion
+from dynpush.runtime.mocap import TrackedPose
+from dynpush.runtime.packets import MODE_STOP, MODE_TARGETS
+from dynpush.runtime.policy import load_push_policy
+from dynpush.runtime.robot_link import ReceivedState
+from dynpush.runtime.safety import SafetyInputs, SafetyMachine, State
+from dynpush.runtime.timing import TickTiming
+from test_runtime_helpers import ARM_DEFAULT, contract, robot_state, write_gemm, write_policy
+
+LEGS = [f"{leg}_{joint}" for leg in ("LF", "RF", "LH", "RH") for joint in ("HAA", "HFE", "KFE")]
+SQ = math.sqrt(0.5)
+
+
+# ---------------------------------------------------------------------------------------------- state machine
+def inputs(**changes) -> SafetyInputs:
+    values = dict(now=0.0, robot_age=0.0, mocap_age=0.0, tilt=0.0, finite=True, ramp_done=True, has_goal=True,
+                  at_goal=False, goal_changed=False)
+    return SafetyInputs(**(values | changes))
+
+
+def machine() -> SafetyMachine:
+    return SafetyMachine(robot_timeout_s=0.1, mocap_timeout_s=0.1, max_tilt_rad=math.radians(30.0))
+
+
+def test_startup_ramp_push_and_mocap_loss():
+    m = machine()
+    assert m.update(inputs(robot_age=math.inf, mocap_age=math.inf)) == State.STARTUP
+    assert m.update(inputs(robot_age=math.inf, finite=False)) == State.STARTUP, "nothing to judge before robot state"
+    assert m.update(inputs(mocap_age=math.inf)) == State.RAMP
+    assert m.update(inputs(ramp_done=False)) == State.RAMP
+    assert m.update(inputs(mocap_age=0.5)) == State.MOCAP_LOST, "ramp ends into mocap loss when mocap is stale"
+    assert m.update(inputs()) == State.PUSH
+    assert m.update(inputs(mocap_age=0.11)) == State.MOCAP_LOST
+    assert m.update(inputs(mocap_age=0.09)) == State.PUSH
+
+
+def test_success_holds_until_a_new_goal():
+    m = machine()
+    m.update(inputs())
+    m.update(inputs())
+    assert m.state == State.PUSH
+    assert m.update(inputs(now=3.0, at_goal=True)) == State.HOLD and m.reason == "goal reached"
+    assert m.reached_since == 3.0
+    assert m.update(inputs(at_goal=False)) == State.HOLD, "no resumption without a new goal"
+    assert m.update(inputs(mocap_age=1.0)) == State.MOCAP_LOST
+    assert m.update(inputs()) == State.HOLD, "the goal stays reached across a mocap loss"
+    assert m.update(inputs(goal_changed=True)) == State.PUSH and m.reached_since is None
+    m2 = machine()
+    m2.update(inputs())
+    assert m2.update(inputs(has_goal=False)) == State.HOLD and m2.reason == "no goal"
+
+
+@pytest.mark.parametrize("bad, reason", [
+    ({"robot_age": 0.2}, "robot state stale"),
+    ({"finite": False}, "non-finite"),
+    ({"tilt": math.radians(31.0)}, "base tilt 31.0 deg"),
+    ({"tilt": math.nan}, "base tilt"),
+])
+@pytest.mark.parametrize("state", [State.RAMP, State.PUSH, State.HOLD, State.MOCAP_LOST])
+def test_stop_conditions_latch_from_every_state(state, bad, reason):
+    m = machine()
+    m.state = state
+    assert m.update(inputs(**bad)) == State.STOPPED and reason in m.reason
+    assert m.update(inputs()) == State.STOPPED, "STOPPED is latched until restart"
+
+
+# ---------------------------------------------------------------------------------------------- controller
+def controller(tmp_path, bias=None, locomotion=False, **sections) -> Controller:
+    policy = write_policy(tmp_path / "p.onnx", bias=bias)
+    data = {"push_policy": {"path": str(policy)}, "safety": {"arm_ramp_s": 1.0}}
+    if locomotion:
+        write_gemm(tmp_path / "loco.onnx", 3 + 6 + 12 + 5, 12, scale=0.0, bias=np.full(12, 10.0))
+        data |= {"locomotion": {"mode": "onnx", "onnx": {
+            "path": str(tmp_path / "loco.onnx"), "joint_names": LEGS, "default_joint_positions": [0.1] * 12,
+            "observation": [{"name": "projected_gravity_b"}, {"name": "base_command", "scale": 2.0},
+                            {"name": "leg_joint_position"}, {"name": "arm_joint_position"}]}},
+                 "robot": {"leg_joint_names": LEGS}}
+        data["safety"] |= {"leg_joint_lower": [-1.0] * 12, "leg_joint_upper": [1.0] * 12}
+    for key, value in sections.items():
+        data[key] = {**data.get(key, {}), **value}
+    cfg = config_from_dict(data)
+    push, c = load_push_policy(cfg)
+    return Controller(cfg, c, push, OnnxLocomotion(cfg.locomotion.onnx, c) if locomotion else None)
+
+
+class Ticks:
+    """Drives a controller tick by tick with fresh measurements unless told otherwise."""
+
+    def __init__(self, ctrl: Controller, legs: int = 0):
+        self.ctrl, self.k, self.legs = ctrl, 0, legs
+        self.state = robot_state(legs=legs)
+        self.object = np.array([0.0, 0.0, 0.35])
+        self.goal = Goal(1.0, 0.0, 0.0)
+
+    def __call__(self, mocap_age=0.0, robot_age=0.0, goal_changed=False):
+        t = 0.02 * self.k
+        timing = TickTiming(index=self.k, deadline=t, start=t, lateness=0.0, skipped=0)
+        self.k += 1
+        base = TrackedPose(Pose(np.array([-1.0, 0.0, 0.5]), np.array([0, 0, 0, 1.0])), t - mocap_age)
+        obj = TrackedPose(Pose(self.object.copy(), np.array([0, 0, 0, 1.0])), t - mocap_age)
+        return self.ctrl.step(timing, base, obj, ReceivedState(self.state, t - robot_age), self.goal, goal_changed)
+
+
+def test_ramp_moves_the_arm_linearly_to_default(tmp_path):
+    ticks = Ticks(controller(tmp_path))
+    start = np.array(ARM_DEFAULT) + 0.4
+    ticks.state.arm_q[:] = start
+    commands = [ticks() for _ in range(60)]
+    assert [c.state for c in commands[:51]] == [State.RAMP] * 51 and commands[51].state == State.PUSH
+    for k in (0, 25, 50):
+        np.testing.assert_allclose(commands[k].arm_targets, start + (k / 50) * (np.array(ARM_DEFAULT) - start), atol=1e-9)
+        np.testing.assert_array_equal(commands[k].base_command, [0, 0, 0, 0, 0, 0.5])
+        assert commands[k].mode == MODE_TARGETS
+
+
+def test_push_commands_are_clamped_to_limits(tmp_path):
+    huge = np.array([50.0, -50.0, 50.0, -50.0, 50.0, 50.0, 50.0, -50.0, 50.0, -50.0, 50.0])
+    lower, upper = [-1.0, -1.0, 0.5, -1.0, -1.0], [1.0, 0.4, 1.5, 1.0, 1.0]  # within the contract's
+    ticks = Ticks(controller(tmp_path, bias=huge, safety={"arm_ramp_s": 0.02, "arm_joint_lower": lower,
+                                                          "arm_joint_upper": upper}))
+    command = [ticks() for _ in range(5)][-1]
+    assert command.state == State.PUSH
+    c = contract()
+    expected_base = np.where(huge[:6] > 0, c.base_command_upper, c.base_command_lower)
+    np.testing.assert_allclose(command.base_command, expected_base)
+    np.testing.assert_allclose(command.arm_targets, np.where(huge[6:] > 0, upper, lower))
+    np.testing.assert_allclose(ticks.ctrl.record[ticks.ctrl.layout.slices["actions"]], huge, atol=2.0,
+                               err_msg="the log keeps the raw (unclipped) policy output")
+
+
+def test_success_stop_and_resume_with_a_new_goal(tmp_path):
+    ticks = Ticks(controller(tmp_path, bias=np.full(11, 0.5), safety={"arm_ramp_s": 0.02}))
+    pushing = [ticks() for _ in range(4)][-1]
+    assert pushing.state == State.PUSH and pushing.base_command[0] == pytest.approx(0.5, abs=0.05)
+    ticks.object[:] = (1.05, 0.03, 0.35)  # 5.8 cm from the goal, aligned: success
+    held = ticks()
+    assert held.state == State.HOLD
+    np.testing.assert_array_equal(held.base_command, [0, 0, 0, 0, 0, 0.5])
+    np.testing.assert_array_equal(held.arm_targets, pushing.arm_targets)
+    ticks.goal = Goal(1.0, 0.0, math.radians(45.0))
+    assert ticks(goal_changed=True).state == State.PUSH
+
+
+def test_stale_mocap_zero_base_arm_holds(tmp_path):
+    ticks = Ticks(controller(tmp_path, bias=np.full(11, 0.5), safety={"arm_ramp_s": 0.02}))
+    pushing = [ticks() for _ in range(4)][-1]
+    lost = ticks(mocap_age=0.15)
+    assert lost.state == State.MOCAP_LOST and lost.mode == MODE_TARGETS
+    np.testing.assert_array_equal(lost.base_command, [0, 0, 0, 0, 0, 0.5])
+    np.testing.assert_array_equal(lost.arm_targets, pushing.arm_targets)
+    assert np.isnan(ticks.ctrl.record[ticks.ctrl.layout.slices["obs"]]).all(), "no observation from stale mocap"
+    assert ticks().state == State.PUSH
+
+
+@pytest.mark.parametrize("fault", ["nan_state", "nan_policy", "tilt", "stale_robot"])
+def test_faults_stop_the_robot(tmp_path, fault):
+    bias = np.full(11, np.nan) if fault == "nan_policy" else None
+    ticks = Ticks(controller(tmp_path, bias=bias, safety={"arm_ramp_s": 0.02}))
+    ticks()
+    if fault == "nan_state":
+        ticks.state.arm_qd[2] = np.nan
+    elif fault == "tilt":
+        ticks.state.base_quat_xyzw[:] = (math.sin(math.radians(20)), 0.0, 0.0, math.cos(math.radians(20)))  # 40 deg roll
+    command = ticks(robot_age=0.5 if fault == "stale_robot" else 0.0)
+    if fault == "nan_policy":  # the policy only runs once the ramp is over
+        command = [ticks() for _ in range(3)][-1]
+    assert command.state == State.STOPPED and command.mode == MODE_STOP
+    assert np.isfinite(command.base_command).all() and np.isfinite(command.arm_targets).all()
+
+
+def test_locomotion_onnx_sends_12_leg_and_5_arm_targets(tmp_path):
+    ticks = Ticks(controller(tmp_path, locomotion=True, safety={"arm_ramp_s": 0.02}), legs=12)
+    command = [ticks() for _ in range(3)][-1]
+    assert command.mode == MODE_TARGETS and command.arm_targets.shape == (5,) and command.leg_targets.shape == (12,)
+    np.testing.assert_allclose(command.leg_targets, 1.0, err_msg="0.1 + 0.5 * 10 clamped to the leg limit 1.0")
+    ctrl = ticks.ctrl
+    obs = ctrl.record[ctrl.layout.slices["locomotion_obs"]]
+    np.testing.assert_allclose(obs[:3], [0, 0, -1], err_msg="projected gravity from the IMU")
+    np.testing.assert_allclose(obs[3:9], 2.0 * command.base_command, rtol=1e-6, err_msg="scaled base command")
+    np.testing.assert_allclose(obs[9:21], -0.1, rtol=1e-6, err_msg="leg positions relative to the default")
+
+
+# ---------------------------------------------------------------------------------------------- frames
+def test_frame_conventions_convert_to_z_up_metres_xyzw():
+    y_up = PoseConverter(FrameConvention(up_axis="y", quaternion_order="wxyz", units="mm"), BodyOffset())
+    pose = y_up([1000.0, 2000.0, 3000.0], [SQ, 0.0, SQ, 0.0])  # (w, x, y, z): 90 deg about the up axis y
+    np.testing.assert_allclose(pose.position, [1.0, -3.0, 2.0])
+    np.testing.assert_allclose(pose.quat_xyzw, [0.0, 0.0, SQ, SQ], atol=1e-12, err_msg="yaw about the up axis stays yaw")
+    same = PoseConverter(FrameConvention(), BodyOffset())([1.0, 2.0, 3.0], [0.0, 0.0, 0.0, 2.0])
+    np.testing.assert_allclose(same.quat_xyzw, [0, 0, 0, 1.0], err_msg="quaternions are normalised")
+    offset = PoseConverter(FrameConvention(), BodyOffset(position=[1.0, 0.0, 0.0], quat_xyzw=list(yaw_quat(0.5))))
+    pose = offset([1.0, 1.0, 0.0], yaw_quat(math.pi / 2))
+    np.testing.assert_allclose(pose.position, [1.0, 2.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(pose.quat_xyzw, yaw_quat(math.pi / 2 + 0.5), atol=1e-12)
+    with pytest.raises(ValueError):
+        offset([np.nan, 0.0, 0.0], [0, 0, 0, 1.0])

@@ -52,7 +52,7 @@ from tqdm import tqdm
 
 from dynpush.kernels.constraints import CONSTRAINT_GROUPS
 from dynpush.kernels.observations import POLICY_TERMS, PRIVILEGED_TERMS
-from dynpush.runtime.observation import quat_to_matrix
+from dynpush.runtime.observation import NUM_ARM_JOINTS, quat_to_matrix
 from dynpush.sim.config import ConfigError, PushEnvConfig
 from dynpush.sim.episode import SHAPES
 from dynpush.sim.push_env import PushEnv
@@ -137,10 +137,13 @@ class EnvProbe:
 
         self.env = env
         self.body_q = wp.to_torch(env.state_0.body_q)  # (bodies, 7): position, quaternion
+        self.joint_q = wp.to_torch(env.state_0.joint_q)
         scene = env.scene
         self.base_body = torch.as_tensor(scene.base_body, dtype=torch.long, device=self.body_q.device)
         self.object_body = torch.as_tensor(scene.object_body, dtype=torch.long, device=self.body_q.device)
         self.ee_body = torch.as_tensor(scene.ee_body, dtype=torch.long, device=self.body_q.device)
+        arm_q_index = np.asarray(scene.arm_q_start)[:, None] + np.arange(NUM_ARM_JOINTS)
+        self.arm_q_index = torch.as_tensor(arm_q_index, dtype=torch.long, device=self.body_q.device)
         self.ee_offset = np.asarray(scene.ee_offset, dtype=np.float64)  # in the EE body frame
 
     def _pose(self, bodies: torch.Tensor) -> np.ndarray:
@@ -158,6 +161,10 @@ class EnvProbe:
         """(n, 3) end-effector point (world, m)."""
         pose = self._pose(self.ee_body)
         return pose[:, :3] + quat_to_matrix(pose[:, 3:]) @ self.ee_offset
+
+    def arm_q(self) -> np.ndarray:
+        """(n, 5) absolute positions [rad] of the 5 controlled arm joints."""
+        return self.joint_q[self.arm_q_index].cpu().numpy().astype(np.float64)
 
     def ee_in_object(self) -> np.ndarray:
         """(n, 3) end-effector point in the object frame (m)."""

@@ -17,10 +17,10 @@ import warp as wp
 
 from dynpush.kernels import actions, base_tracking, constraints, contacts, keypoints, rewards, sampling, terminations
 from dynpush.kernels.views import CONTACT_COLUMNS, EE_CONTACT, NUM_COLLISIONS, PushTask, RobotView
+from warp_numpy_helpers import DEVICE, make_struct, quat_rotate, quat_rotate_inv, random_quat
 
 wp.config.enable_backward = False
 wp.config.quiet = True
-DEVICE = "cpu"
 
 ROBOT_BODIES = 4
 STRIDE = ROBOT_BODIES + 1
@@ -30,15 +30,8 @@ OBJECT_Q, OBJECT_QD = 13, 12
 
 
 # --------------------------------------------------------------------------- numpy geometry
-def quat_rotate(q, v):
-    """Rotates ``v`` (..., 3) by unit quaternions ``q`` (..., 4) stored (x, y, z, w)."""
-    u, w = q[..., :3], q[..., 3:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
 
 
-def quat_rotate_inv(q, v):
-    return quat_rotate(q * np.array([-1.0, -1.0, -1.0, 1.0]), v)
 
 
 def quat_matrix(q):
@@ -60,9 +53,6 @@ def yaw_quat(yaw):
     return axis_angle_quat(np.broadcast_to([0.0, 0.0, 1.0], np.shape(yaw) + (3,)), np.asarray(yaw))
 
 
-def random_quat(rng, n):
-    q = rng.normal(size=(n, 4))
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
 def transform_point(x, p):
@@ -96,18 +86,6 @@ def assert_uniform(u, name):
 
 
 # --------------------------------------------------------------------------- structs and launches
-def make_struct(cls, **values):
-    """A Warp struct whose array fields are CPU copies of the given numpy arrays (dtype from the struct)."""
-    s = cls()
-    for name, value in values.items():
-        kind = cls.vars[name].type
-        if wp.types.is_array(kind):
-            dtype = np.int32 if kind.dtype in (wp.int32, int) else np.float32
-            value = wp.array(np.asarray(value, dtype=dtype), dtype=kind.dtype, device=DEVICE)
-        elif kind is wp.vec3 or kind is wp.vec2:
-            value = kind(*value)
-        setattr(s, name, value)
-    return s
 
 
 def arr(values, dtype=float):

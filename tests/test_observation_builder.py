@@ -16,9 +16,9 @@ import warp as wp
 from dynpush.kernels.observations import POLICY_TERMS, PRIVILEGED_TERMS, compute_observations
 from dynpush.kernels.views import CONTACT_COLUMNS, EE_CONTACT, NUM_CRITIC_OBS, NUM_POLICY_OBS, PushTask, RobotView
 from dynpush.runtime.observation import POLICY_OBSERVATION_LAYOUT, POLICY_OBSERVATION_SIZE, policy_observation
+from warp_numpy_helpers import DEVICE, make_struct, quat_rotate, quat_rotate_inv, random_quat
 
 wp.config.quiet = True
-DEVICE = "cpu"
 STRIDE = 3  # bodies per world: object, base, end-effector link
 Q, QD, ARM_Q, ARM_QD = 20, 18, 7, 6  # joint coordinates/DOFs per world and the arm's offsets
 # Paper Table "Observations": noise half-width of each actor term, in POLICY_TERMS order.
@@ -30,20 +30,10 @@ PAPER_NOISE = {
 NOISE_SCALE = np.concatenate([np.full(size, PAPER_NOISE[name]) for name, size in POLICY_TERMS]).astype(np.float32)
 
 
-def quat_rotate(q, v):
-    """Rotates ``v`` (..., 3) by unit quaternions ``q`` (..., 4) stored (x, y, z, w)."""
-    u, w = q[..., :3], q[..., 3:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
 
 
-def quat_rotate_inv(q, v):
-    return quat_rotate(q * np.array([-1.0, -1.0, -1.0, 1.0]), v)
 
 
-def random_quat(rng, n):
-    q = rng.normal(size=(n, 4))
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
 def random_worlds(rng, n):
@@ -72,18 +62,6 @@ def random_worlds(rng, n):
     return f32(robot), f32(task)
 
 
-def make_struct(cls, **values):
-    """A Warp struct whose array fields are CPU copies of the given numpy arrays (dtype from the struct)."""
-    s = cls()
-    for name, value in values.items():
-        kind = cls.vars[name].type
-        if wp.types.is_array(kind):
-            dtype = np.int32 if kind.dtype in (wp.int32, int) else np.float32
-            value = wp.array(np.asarray(value, dtype=dtype), dtype=kind.dtype, device=DEVICE)
-        elif kind is wp.vec3:
-            value = wp.vec3(*value)
-        setattr(s, name, value)
-    return s
 
 
 def observe(robot, task, noise_enabled, seed=5):

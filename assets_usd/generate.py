@@ -118,7 +118,9 @@ No ground, no joints, no scene.
 Ground (``ground.usda``, defaultPrim ``/Ground``)
 -------------------------------------------------
 A static z-up ``Plane`` collider ``/Ground/plane`` at z = 0 with a physics material of
-friction 1.0 (static and dynamic), restitution 0.
+friction 0.4 (static and dynamic), restitution 0. Newton combines the coefficients of a contact
+by their mean, so the simulator gives each object ``2 * combined - 0.4``: the floor's 0.4 lets the
+combined object-floor coefficient span the paper's randomisation range [0.4, 1.25] (III-E).
 
 None of the files holds a ``PhysicsScene``: the simulator owns gravity and solver settings.
 """
@@ -250,7 +252,7 @@ CYLINDER_RADIUS = 0.25
 CYLINDER_HEIGHT = 0.7
 OBJECT_MASS = 5.0
 OBJECT_FRICTION = 0.8
-GROUND_FRICTION = 1.0
+GROUND_FRICTION = 0.4
 
 FILE_NAMES = {
     "robot": "robot.usda",

@@ -105,7 +105,7 @@ def build_contract(cfg: TrainConfig) -> PolicyContract:
     from dynpush.sim.scene import build_scene
 
     env = cfg.env
-    robot = build_scene(1, "cpu", env.sim.ground_friction).robot
+    robot = build_scene(1, "cpu").robot
     arm = slice(0, NUM_ARM_JOINTS)
     noise = {f.name: getattr(env.noise, f.name) for f in dataclasses.fields(env.noise) if f.name != "enabled"}
     training_config = cfg.to_dict()

@@ -282,12 +282,12 @@ def run_scenario(policy_path: Path, scenario: Scenario, out_dir: Path, noise: bo
     # The environment's own time-out must never end a goal: the per-goal budget is enforced here.
     env_overrides = (*overrides, f"env.episode_length_s={scenario.goal_timeout_s + 1.0}")
     env_cfg = env_config_for(policy, len(worlds), noise, device, seed, env_overrides)
-    min_friction = 0.5 * env_cfg.sim.ground_friction
+    env = PushEnv(env_cfg)
+    min_friction = 0.5 * env.scene.ground_friction
     for i, obj in enumerate(scenario.objects):
         if obj.friction < min_friction:
             raise ConfigError(f"{scenario.name}.objects[{i}].friction must be >= {min_friction} (half the floor's"
-                              f" own coefficient, sim.ground_friction), got {obj.friction}")
-    env = PushEnv(env_cfg)
+                              f" own coefficient in ground.usda), got {obj.friction}")
     probe = EnvProbe(env)
     dt = env_cfg.control_dt
     budget = int(round(scenario.goal_timeout_s / dt))

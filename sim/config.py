@@ -250,7 +250,6 @@ class SimConfig:
     solver: str = "xpbd"
     substeps: int = 4  # per 20 ms control step
     xpbd_iterations: int = 4
-    ground_friction: float = 0.4  # the floor's own coefficient; object mu = 2 * combined - ground
     contacts_per_world: int = 48  # contact buffer budget; a resting box uses ~8, a push ~12
 
     def validate(self, prefix: str = "sim") -> None:
@@ -260,7 +259,6 @@ class SimConfig:
             raise ConfigError(f"{prefix}.substeps must be an even integer >= 2, got {self.substeps!r}")
         if self.xpbd_iterations < 1:
             raise ConfigError(f"{prefix}.xpbd_iterations must be >= 1, got {self.xpbd_iterations!r}")
-        _check_positive(f"{prefix}.ground_friction", self.ground_friction, allow_zero=True)
         if self.contacts_per_world < 8:
             raise ConfigError(f"{prefix}.contacts_per_world must be >= 8, got {self.contacts_per_world!r}")
 
@@ -298,12 +296,6 @@ class PushEnvConfig:
         _check_positive("episode_length_s", self.episode_length_s)
         if self.max_episode_steps < 1:
             raise ConfigError("episode_length_s must be at least one control step")
-        # Combined friction is the mean of object and floor coefficients; the object's must stay >= 0.
-        if 2.0 * self.randomization.friction[0] < self.sim.ground_friction:
-            raise ConfigError(
-                f"sim.ground_friction must be <= 2 * randomization.friction[0] = {2 * self.randomization.friction[0]}"
-                f" so that the object's own coefficient stays >= 0, got {self.sim.ground_friction}"
-            )
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if hasattr(value, "validate"):

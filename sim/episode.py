@@ -38,15 +38,17 @@ class EpisodeSpec:
     ARRAY_FIELDS = ("shape", "dims", "mass", "com_o", "friction", "object_yaw", "reach_target_o", "goal", "base",
                     "arm_q", "base_mass_offset", "first_push_step")
 
-    def validate(self, arm_default: np.ndarray) -> None:
+    def validate(self, arm_default: np.ndarray, ground_friction: float) -> None:
         if self.shape not in SHAPES:
             raise ConfigError(f"episode.shape must be one of {SHAPES}, got {self.shape!r}")
         if len(self.dims) != 3 or not all(0.05 <= d <= 2.0 for d in self.dims):
             raise ConfigError(f"episode.dims must be 3 lengths in [0.05, 2.0] m, got {self.dims!r}")
         if not (math.isfinite(self.mass) and self.mass > 0.0):
             raise ConfigError(f"episode.mass must be > 0 kg, got {self.mass!r}")
-        if not (math.isfinite(self.friction) and self.friction >= 0.0):
-            raise ConfigError(f"episode.friction must be >= 0, got {self.friction!r}")
+        # Newton averages coefficients: the object's own, 2 * friction - floor, must stay >= 0.
+        if not (math.isfinite(self.friction) and self.friction >= 0.5 * ground_friction):
+            raise ConfigError(f"episode.friction must be >= {0.5 * ground_friction} (half the floor's coefficient),"
+                              f" got {self.friction!r}")
         for name in ("com_offset", "goal", "base"):
             value = getattr(self, name)
             if len(value) != 3 or not all(math.isfinite(v) for v in value):

@@ -60,7 +60,11 @@ class PushEnv(VecEnv):
         self.wp_device = wp.get_device(cfg.device)
         self.constraint_groups = list(CONSTRAINT_GROUPS)
         with wp.ScopedDevice(self.wp_device):
-            self.scene = build_scene(cfg.num_envs, cfg.device, cfg.sim.ground_friction)
+            self.scene = build_scene(cfg.num_envs, cfg.device)
+            # Newton averages the two coefficients of a contact: the object's own is 2 * combined - floor.
+            if 2.0 * cfg.randomization.friction[0] < self.scene.ground_friction:
+                raise ConfigError(f"randomization.friction[0] must be >= half the floor's coefficient"
+                                  f" ({self.scene.ground_friction} in ground.usda), got {cfg.randomization.friction[0]}")
             self._make_solver()
             self._make_buffers()
             self._make_params()
@@ -258,7 +262,7 @@ class PushEnv(VecEnv):
             setattr(sp, name, wp.vec2(*getattr(s, name)))
         sp.surface_target = int(s.reach_target_on_surface)
         sp.friction = wp.vec2(*rnd.friction)
-        sp.ground_friction = cfg.sim.ground_friction
+        sp.ground_friction = self.scene.ground_friction
         sp.mass = wp.vec2(*rnd.mass)
         sp.com_fraction_lo = wp.vec3(rnd.com_fraction_x[0], rnd.com_fraction_y[0], rnd.com_fraction_z[0])
         sp.com_fraction_hi = wp.vec3(rnd.com_fraction_x[1], rnd.com_fraction_y[1], rnd.com_fraction_z[1])
@@ -378,7 +382,7 @@ class PushEnv(VecEnv):
             arrays = {name: getattr(self.spec, name).numpy() for name in EpisodeSpec.ARRAY_FIELDS}
             flags = np.zeros(self.num_envs, dtype=np.int32)
             for w, episode in episodes.items():
-                episode.validate(arm_default=self.scene.robot.arm_default[:NUM_ARM_JOINTS])
+                episode.validate(self.scene.robot.arm_default[:NUM_ARM_JOINTS], self.scene.ground_friction)
                 for name, value in episode.as_arrays(self.scene.robot.arm_default[:NUM_ARM_JOINTS]).items():
                     arrays[name][w] = value
                 flags[w] = 1

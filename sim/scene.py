@@ -55,6 +55,7 @@ class Scene:
 
     model: newton.Model
     robot: RobotDescription
+    ground_friction: float  # the floor's own coefficient (ground.usda)
     num_worlds: int
     bodies_per_world: int
     base_body: np.ndarray  # (N,) per world
@@ -88,7 +89,7 @@ def _read_robot_attributes() -> tuple[np.ndarray, dict[str, np.ndarray]]:
     return arm_default, legs
 
 
-def _robot_builder(ground_friction: float) -> tuple[newton.ModelBuilder, RobotDescription, dict]:
+def _robot_builder() -> tuple[newton.ModelBuilder, RobotDescription, dict]:
     builder = newton.ModelBuilder()
     builder.add_usd(str(ROBOT_USD), enable_self_collisions=True)
     arm_default, legs = _read_robot_attributes()
@@ -134,9 +135,9 @@ def _robot_builder(ground_friction: float) -> tuple[newton.ModelBuilder, RobotDe
     return builder, description, names
 
 
-def build_scene(num_worlds: int, device: str, ground_friction: float) -> Scene:
+def build_scene(num_worlds: int, device: str) -> Scene:
     """Replicates robot + object into ``num_worlds`` worlds and finalizes the model on ``device``."""
-    robot, description, names = _robot_builder(ground_friction)
+    robot, description, names = _robot_builder()
 
     variants = []
     for path in (CUBOID_USD, CYLINDER_USD):
@@ -154,8 +155,6 @@ def build_scene(num_worlds: int, device: str, ground_friction: float) -> Scene:
     builder.replicate(world, num_worlds)
     builder.add_usd(str(GROUND_USD))
     ground_shapes = [s for s in range(builder.shape_count) if builder.shape_world[s] < 0]
-    for s in ground_shapes:
-        builder.shape_material_mu[s] = ground_friction
 
     # Leg capsules stand for stepping legs: they never touch the floor (the tracked base floats).
     shapes_per_world = world.shape_count
@@ -202,6 +201,7 @@ def build_scene(num_worlds: int, device: str, ground_friction: float) -> Scene:
     return Scene(
         model=model,
         robot=description,
+        ground_friction=float(builder.shape_material_mu[ground_shapes[0]]),
         num_worlds=num_worlds,
         bodies_per_world=bodies_per_world,
         base_body=w_idx * bodies_per_world + names["body"]["base"],

@@ -100,7 +100,6 @@ def test_same_seed_same_rollout():
         (PushEnvConfig(sim=SimConfig(substeps=3)), "sim.substeps"),
         (PushEnvConfig(randomization=RandomizationConfig(mass=(10.0, 1.0))), "randomization.mass"),
         (PushEnvConfig(randomization=RandomizationConfig(size_x=(-0.5, 0.75))), "randomization.size_x"),
-        (PushEnvConfig(randomization=RandomizationConfig(friction=(0.1, 1.0))), "sim.ground_friction"),
     ],
 )
 def test_invalid_config_names_the_field(cfg, field):
@@ -108,11 +107,18 @@ def test_invalid_config_names_the_field(cfg, field):
         cfg.validate()
 
 
+def test_friction_range_below_half_the_floor_is_refused():
+    with pytest.raises(ConfigError, match=r"randomization\.friction\[0\]"):
+        PushEnv(PushEnvConfig(num_envs=1, randomization=RandomizationConfig(friction=(0.1, 1.0))))
+
+
 def test_invalid_episode_names_the_field(small_env):
     with pytest.raises(ConfigError, match="episode.shape"):
         small_env.set_episodes({0: EpisodeSpec(shape="sphere")})
     with pytest.raises(ConfigError, match="episode.dims"):
         small_env.set_episodes({0: EpisodeSpec(dims=(0.5, -0.5, 0.7))})
+    with pytest.raises(ConfigError, match="episode.friction"):
+        small_env.set_episodes({0: EpisodeSpec(friction=0.1)})
     with pytest.raises(IndexError, match="world index"):
         small_env.set_episodes({7: EpisodeSpec()})
 

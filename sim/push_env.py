@@ -69,11 +69,9 @@ class PushEnv(VecEnv):
             self._make_buffers()
             self._make_params()
             self.reset(randomize_episode_step=cfg.randomize_first_episode_length)
-            self._graph = None
-            if self.wp_device.is_cpu or self.wp_device.is_cuda:
-                with wp.ScopedCapture() as capture:
-                    self._step_kernels()
-                self._graph = capture.graph
+            with wp.ScopedCapture() as capture:  # works on the CPU device too (NEWTON_NOTES.md)
+                self._step_kernels()
+            self._graph = capture.graph
 
     # ------------------------------------------------------------------ construction
     def _make_solver(self) -> None:
@@ -84,7 +82,8 @@ class PushEnv(VecEnv):
                 model, iterations=self.cfg.sim.xpbd_iterations, rigid_contact_con_weighting=False
             )
         else:
-            self.solver = newton.solvers.SolverMuJoCo(model)
+            # Body variants (the cuboid/cylinder object) need Newton's own contacts.
+            self.solver = newton.solvers.SolverMuJoCo(model, use_mujoco_contacts=False)
         self.state_0 = model.state()
         self.state_1 = model.state()
         self.control = model.control()
@@ -453,10 +452,7 @@ class PushEnv(VecEnv):
     def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
         self.actions_t.copy_(actions)
         with wp.ScopedDevice(self.wp_device):
-            if self._graph is not None:
-                wp.capture_launch(self._graph)
-            else:
-                self._step_kernels()
+            wp.capture_launch(self._graph)
         dones = self.reset_t.to(torch.long)
         extras = {
             "time_outs": self.time_out_t.to(torch.bool),

@@ -114,8 +114,20 @@ class EpisodeSpec:
 
 
 @wp.kernel
-def sample_episodes(reset: wp.array(dtype=int), seed: int, params: SamplingParams, task: PushTask, spec: EpisodeSpec):
-    """Draws the episode of every world with ``reset[w] != 0`` into ``spec`` (paper III-B, III-E)."""
+def sample_episodes(
+    reset: wp.array(dtype=int),
+    seed: int,
+    params: SamplingParams,
+    goal_difficulty: wp.array(dtype=float),
+    task: PushTask,
+    spec: EpisodeSpec,
+):
+    """Draws the episode of every world with ``reset[w] != 0`` into ``spec`` (paper III-B, III-E).
+
+    ``goal_difficulty[0]`` in [0, 1] (a training curriculum; 1 is the paper's task) interpolates the
+    goal pose between the object's start pose and the drawn goal: position ``d * p_goal``, yaw
+    ``yaw_object + d * wrap(yaw_goal - yaw_object)``. At 1 the goal is exactly the drawn one.
+    """
     w = wp.tid()
     if reset[w] == 0:
         return
@@ -137,12 +149,17 @@ def sample_episodes(reset: wp.array(dtype=int), seed: int, params: SamplingParam
         wp.randf(rng, params.com_fraction_lo[2], params.com_fraction_hi[2]) * d[2],
     )
     spec.friction[w] = uniform(rng, params.friction)
-    spec.object_yaw[w] = uniform(rng, params.object_yaw)
+    object_yaw = uniform(rng, params.object_yaw)
+    spec.object_yaw[w] = object_yaw
     spec.reach_target_o[w] = wp.vec3(0.0)
     if params.surface_target != 0:
         spec.reach_target_o[w] = surface_point(rng, shape, d)
     # Goal and robot uniform by area in their annuli.
-    spec.goal[w] = polar_pose(rng, params.goal_radius, params.goal_bearing, params.goal_yaw)
+    goal = polar_pose(rng, params.goal_radius, params.goal_bearing, params.goal_yaw)
+    difficulty = goal_difficulty[0]
+    yaw_change = wp.atan2(wp.sin(goal[2] - object_yaw), wp.cos(goal[2] - object_yaw))
+    goal_yaw = wp.where(difficulty < 1.0, object_yaw + difficulty * yaw_change, goal[2])
+    spec.goal[w] = wp.vec3(difficulty * goal[0], difficulty * goal[1], goal_yaw)
     spec.base[w] = polar_pose(rng, params.robot_radius, params.robot_bearing, params.base_yaw)
     for j in range(NUM_ARM_JOINTS):
         spec.arm_q[w, j] = task.arm_default[j] + wp.randf(rng, -params.arm_joint_noise, params.arm_joint_noise)

@@ -33,12 +33,15 @@ class ProgressLogger(Logger):
     appends the iteration's summary to ``progress.jsonl`` in the run folder (the learning curve)."""
 
     bar: tqdm | None = None
+    run_state: dict[str, float]  # values set by the runner for this iteration (e.g. the curriculum)
 
     def log(self, it: int, start_it: int, total_it: int, collect_time: float, learn_time: float, **kwargs) -> None:
         if self.writer is None:  # non-zero ranks of a distributed run
             super().log(it, start_it, total_it, collect_time, learn_time, **kwargs)
             return
-        summary = iteration_summary(self.ep_extras)
+        summary = {**iteration_summary(self.ep_extras), **self.run_state}
+        for key, value in self.run_state.items():
+            self.writer.add_scalar(key.lstrip("/"), value, it)
         with contextlib.redirect_stdout(io.StringIO()):
             super().log(it, start_it, total_it, collect_time, learn_time, **kwargs)
         record = {"iteration": it, "time": time.time(), "collect_s": collect_time, "learn_s": learn_time, **summary}
@@ -59,6 +62,7 @@ class ProgressLogger(Logger):
             f" | success {summary.get('/episode/success', float('nan')):.3f}"
             f" toppled {summary.get('/episode/toppled', float('nan')):.3f}"
             f" | delta {summary.get('CaT/mean_delta', float('nan')):.4f} | violated: {violations}"
+            + "".join(f" | {key.rsplit('/', 1)[-1]} {value:.3f}" for key, value in self.run_state.items())
         )
         self.bar.update(1)
         if it + 1 >= total_it:

@@ -18,6 +18,7 @@ from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner
 
 from dynpush.policies.cat_ppo import CaTPPO
+from dynpush.policies.curriculum import GoalCurriculumConfig
 from dynpush.policies.progress import ProgressLogger
 from dynpush.policies.schedules import ScheduleConfig, p_max_at, reach_weight_at
 
@@ -42,7 +43,9 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         if not isinstance(self.alg, CaTPPO):
             raise TypeError(f"CaTOnPolicyRunner needs a CaTPPO algorithm, got {type(self.alg).__name__}.")
         self.schedule_cfg = ScheduleConfig.from_dict(train_cfg.get("schedule", {}))
+        self.curriculum = GoalCurriculumConfig(**train_cfg.get("curriculum", {}))
         self.logger.__class__ = ProgressLogger  # rsl_rl's logger plus a progress bar and a one-line summary
+        self.logger.run_state = {}
         self._snapshot: dict | None = None
 
     def learn(
@@ -58,6 +61,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
 
         def on_rollout_start() -> None:
             it = next(iterations)
+            if self.curriculum.enabled:
+                self.apply_curriculum(fresh_run=it == 0)
             self._snapshot = {"iteration": it, **copy.deepcopy(self._training_state(next_iteration=it))}
             self.apply_schedules(it, total_it)
 
@@ -68,6 +73,14 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         """Set ``p_max`` and the reach-reward weight for ``iteration`` of a run of ``total_iterations``."""
         self.alg.set_p_max(p_max_at(iteration, total_iterations, self.schedule_cfg, self.env.constraint_groups))
         self.env.set_reward_weight("reach", reach_weight_at(iteration, total_iterations, self.schedule_cfg))
+
+    def apply_curriculum(self, fresh_run: bool) -> None:
+        """Sets the goal difficulty from the success rate of the episodes that ended since the last call."""
+        success_rate = self.env.take_success_rate()
+        difficulty = self.curriculum.initial if fresh_run else self.curriculum.next_difficulty(
+            self.env.goal_difficulty_value, success_rate)
+        self.env.set_goal_difficulty(difficulty)
+        self.logger.run_state["/curriculum/goal_difficulty"] = difficulty
 
     def _training_state(self, next_iteration: int) -> dict:
         saved = self.alg.save()

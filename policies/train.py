@@ -21,6 +21,7 @@ from dynpush.sim.config import ConfigError, PushEnvConfig
 
 from dynpush.kernels.constraints import CONSTRAINT_GROUPS
 
+from .curriculum import GoalCurriculumConfig
 from .runner import CaTOnPolicyRunner
 from .schedules import ConstraintCurriculumConfig
 
@@ -66,6 +67,7 @@ class TrainConfig:
     scale_schedules_with_run_length: bool = True
     # Constraint groups whose p_max is held at 0 (Table I ablation: "w/o object balance constraint").
     disabled_constraint_groups: tuple[str, ...] = ()
+    curriculum: GoalCurriculumConfig = field(default_factory=GoalCurriculumConfig)
 
     @staticmethod
     def preset_config(name: str) -> TrainConfig:
@@ -81,6 +83,7 @@ class TrainConfig:
 
     def validate(self) -> TrainConfig:
         self.env.validate()
+        self.curriculum.validate()
         for name in ("iterations", "num_steps_per_env", "save_interval"):
             if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be an integer >= 1, got {getattr(self, name)!r}")
@@ -114,6 +117,7 @@ class TrainConfig:
                 "constraints": {"p_max": {**ConstraintCurriculumConfig().p_max,
                                           **{name: (0.0, 0.0) for name in self.disabled_constraint_groups}}},
             },
+            "curriculum": dataclasses.asdict(self.curriculum),
             "logger": "tensorboard",
             "check_for_nan": True,
         }

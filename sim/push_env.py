@@ -141,6 +141,9 @@ class PushEnv(VecEnv):
         self.episode_toppled = zeros(n, int)
         self.constraints = zeros((n, constraints_k.NUM_CONSTRAINTS))
         self.variant = zeros(n, int)
+        self.goal_difficulty = wp.ones(1, dtype=float)  # 1: the paper's goal distribution
+        self._episodes_ended = 0
+        self._episodes_succeeded = 0
         spec = sampling.EpisodeSpec()
         for name in ("shape", "first_push_step"):
             setattr(spec, name, zeros(n, int))
@@ -346,7 +349,8 @@ class PushEnv(VecEnv):
 
     def _reset_flagged(self) -> None:
         """Draws and starts new episodes for worlds with ``reset_flags != 0`` (inside the captured step)."""
-        self._launch(sampling.sample_episodes, [self.reset_flags, self.cfg.seed, self.sampling_params, self.task, self.spec])
+        self._launch(sampling.sample_episodes, [self.reset_flags, self.cfg.seed, self.sampling_params, self.goal_difficulty,
+                                                self.task, self.spec])
         self._start_flagged()
 
     def _start_flagged(self) -> None:
@@ -468,6 +472,7 @@ class PushEnv(VecEnv):
         for k in ("body_q", "body_qd", "joint_q", "joint_qd"):
             arrays[f"state.{k}"] = getattr(self.state_0, k)
         arrays["control.joint_target_q"] = self.control.joint_target_q
+        arrays["goal_difficulty"] = self.goal_difficulty
         arrays["policy_obs"] = self.policy_obs
         arrays["critic_obs"] = self.critic_obs
         return arrays
@@ -496,6 +501,23 @@ class PushEnv(VecEnv):
                 array.assign(state[name])
             self.reset_flags.zero_()
 
+    def set_goal_difficulty(self, difficulty: float) -> None:
+        """Scales the goal of episodes drawn from now on toward the object's start pose (a training
+        curriculum; ``kernels/sampling.py``). 1 is the paper's task."""
+        if not 0.0 <= difficulty <= 1.0:
+            raise ConfigError(f"goal difficulty must lie in [0, 1], got {difficulty!r}")
+        self.goal_difficulty.fill_(difficulty)
+
+    @property
+    def goal_difficulty_value(self) -> float:
+        return float(self.goal_difficulty.numpy()[0])
+
+    def take_success_rate(self) -> float | None:
+        """Success rate of the episodes that ended since the last call (None if none ended)."""
+        ended, succeeded = self._episodes_ended, self._episodes_succeeded
+        self._episodes_ended = self._episodes_succeeded = 0
+        return succeeded / ended if ended else None
+
     def set_reward_weight(self, name: str, value: float) -> None:
         """Changes one reward weight (``task``, ``reach``, ``object_velocity``, ``action_rate``)."""
         if name not in REWARD_TERMS:
@@ -513,7 +535,10 @@ class PushEnv(VecEnv):
         log: dict[str, float | torch.Tensor] = {}
         ended = self.episode_success_t >= 0
         if bool(ended.any()):
-            log["/episode/success"] = (self.episode_success_t[ended] == 1).float()
+            succeeded = (self.episode_success_t[ended] == 1).float()
+            self._episodes_ended += int(succeeded.numel())
+            self._episodes_succeeded += int(succeeded.sum())
+            log["/episode/success"] = succeeded
             log["/episode/toppled"] = self.episode_toppled_t[ended].float()
         for i, name in enumerate(REWARD_TERMS):
             log[f"/reward/{name}"] = float(self.reward_terms_t[:, i].mean())

@@ -476,7 +476,7 @@ def test_sample_episodes_narrow_ranges():
     task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(4), n))
     params = sampling_params(robot_bearing=(2.0, 2.5), goal_bearing=(-0.3, 0.1), goal_radius=(0.5, 0.8),
                              object_yaw=(0.2, 0.2), goal_yaw=(-1.0, -0.5), base_yaw=(3.0, 3.1))
-    launch(sampling.sample_episodes, n, arr(np.ones(n, np.int32), int), 5, params, task, spec)
+    launch(sampling.sample_episodes, n, arr(np.ones(n, np.int32), int), 5, params, arr([1.0]), task, spec)
     out = read_struct(sampling.EpisodeSpec, spec)
     goal, base = out["goal"], out["base"]
     bearing = lambda xy: np.arctan2(xy[:, 1], xy[:, 0])  # noqa: E731
@@ -495,6 +495,24 @@ def read_struct(cls, s):
     return {name: getattr(s, name).numpy() for name, var in cls.vars.items() if wp.types.is_array(var.type)}
 
 
+def test_goal_difficulty_interpolates_from_the_object_pose():
+    """Curriculum: at difficulty d the goal is d of the way from the object's start pose to the drawn goal."""
+    n = 2000
+    goals = {}
+    for d in (1.0, 0.4, 0.0):
+        _, task_np = random_state(np.random.default_rng(3), n)  # identical random streams for every d
+        task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(4), n))
+        launch(sampling.sample_episodes, n, arr(np.ones(n, np.int32), int), 9, sampling_params(), arr([d]), task, spec)
+        out = read_struct(sampling.EpisodeSpec, spec)
+        goals[d] = out["goal"]
+        object_yaw = out["object_yaw"]
+    wrap = lambda a: np.arctan2(np.sin(a), np.cos(a))  # noqa: E731
+    close(goals[0.4][:, :2], 0.4 * goals[1.0][:, :2], atol=1e-5)
+    close(wrap(goals[0.4][:, 2] - object_yaw), 0.4 * wrap(goals[1.0][:, 2] - object_yaw), atol=1e-4)
+    close(goals[0.0][:, :2], 0.0, atol=0)
+    close(wrap(goals[0.0][:, 2] - object_yaw), 0.0, atol=1e-6)
+
+
 def test_sample_episodes():
     rng = np.random.default_rng(7)
     n = 20000
@@ -503,7 +521,7 @@ def test_sample_episodes():
     _, task_np = random_state(rng, n)
     before = random_spec(rng, n)
     task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **before)
-    launch(sampling.sample_episodes, n, arr(reset, int), 11, sampling_params(), task, spec)
+    launch(sampling.sample_episodes, n, arr(reset, int), 11, sampling_params(), arr([1.0]), task, spec)
     out = read_struct(sampling.EpisodeSpec, spec)
 
     # Worlds that do not reset keep their episode; every reset world draws from a fresh stream.
@@ -562,7 +580,7 @@ def test_sample_episodes():
 
     # Ablation (Table I): the reach target at the centroid.
     spec = make_struct(sampling.EpisodeSpec, **random_spec(rng, 64))
-    launch(sampling.sample_episodes, 64, arr(np.ones(64), int), 3, sampling_params(surface_target=0), task, spec)
+    launch(sampling.sample_episodes, 64, arr(np.ones(64), int), 3, sampling_params(surface_target=0), arr([1.0]), task, spec)
     np.testing.assert_array_equal(spec.reach_target_o.numpy(), 0.0)
 
 

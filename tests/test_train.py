@@ -70,3 +70,25 @@ def test_corrupted_checkpoint_is_reported(tmp_path):
     (run / "model_1.pt").write_bytes(b"not a checkpoint")
     with pytest.raises(RuntimeError, match="cannot read checkpoint"):
         train(tiny(2), run, resume=True)
+
+
+def test_goal_curriculum_steps_with_the_success_rate():
+    from dynpush.policies.curriculum import GoalCurriculumConfig
+
+    cfg = GoalCurriculumConfig(enabled=True, initial=0.1, step=0.05, promote_above=0.5, demote_below=0.2)
+    assert cfg.next_difficulty(0.3, 0.8) == pytest.approx(0.35)
+    assert cfg.next_difficulty(0.3, 0.1) == pytest.approx(0.25)
+    assert cfg.next_difficulty(0.3, 0.3) == 0.3 and cfg.next_difficulty(0.3, None) == 0.3
+    assert cfg.next_difficulty(1.0, 0.9) == 1.0 and cfg.next_difficulty(0.1, 0.0) == 0.1
+    with pytest.raises(ConfigError, match="curriculum.step"):
+        GoalCurriculumConfig(step=2.0).validate()
+
+
+def test_curriculum_run_starts_easy_and_eval_envs_stay_at_the_papers_task(tmp_path):
+    from dynpush.sim.config import PushEnvConfig
+    from dynpush.sim.push_env import PushEnv
+
+    cfg = apply_overrides(tiny(2), ["curriculum.enabled=True", "curriculum.initial=0.2"])
+    runner = train(cfg, tmp_path / "run")
+    assert 0.2 <= runner.env.goal_difficulty_value <= 0.25
+    assert PushEnv(PushEnvConfig(num_envs=1)).goal_difficulty_value == 1.0

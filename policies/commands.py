@@ -75,6 +75,7 @@ def _play(args: argparse.Namespace) -> int:
 
     policy = Path(args.policy)
     out = Path(args.out) if args.out else policy.parent / "play.png"
+    out = out if out.suffix == ".png" else out.with_suffix(".png")  # the file matplotlib writes
     result = play(policy, args.episodes, out, Path(args.usd) if args.usd else None, args.noise, args.seed,
                   tuple(args.set or ()))
     outcomes = ["success" if e["success"] else "toppled" if e["toppled"] else "failed" for e in result["episodes"]]

@@ -177,6 +177,10 @@ class PushEnv(VecEnv):
         self.episode_toppled_t = t(self.episode_toppled)
         self.success_t = t(self.success)
         self.episode_length_buf = t(task.episode_step)
+        # Per-episode constraint statistics (torch glue): steps with any column of a group violated.
+        self._group_sizes = [size for _, size in CONSTRAINT_GROUPS]
+        self._violated_steps = torch.zeros(n, len(CONSTRAINT_GROUPS), device=self.constraints_t.device)
+        self._steps_in_episode = torch.zeros(n, device=self.constraints_t.device)
 
     def _robot_view(self, state: newton.State) -> RobotView:
         scene, model = self.scene, self.scene.model
@@ -394,6 +398,9 @@ class PushEnv(VecEnv):
             self.reset_flags.assign(flags)
             self._start_flagged()
             self._sync_targets_and_observe()
+        started = torch.as_tensor(list(episodes), dtype=torch.long)
+        self._violated_steps[started] = 0.0
+        self._steps_in_episode[started] = 0.0
         return self.get_observations()
 
     def set_goals(self, goals: dict[int, tuple[float, float, float]]) -> TensorDict:
@@ -442,6 +449,8 @@ class PushEnv(VecEnv):
                 rng = np.random.default_rng(self.cfg.seed)
                 self.task.episode_step.assign(rng.integers(0, self.max_episode_length, self.num_envs, dtype=np.int32))
             self._sync_targets_and_observe()
+        self._violated_steps.zero_()
+        self._steps_in_episode.zero_()
         return self.get_observations()
 
     def get_observations(self) -> TensorDict:
@@ -530,11 +539,20 @@ class PushEnv(VecEnv):
         """Metrics of the episodes that ended this step and the mean of each reward term.
 
         Episode metrics are per ended episode (tensors), so rsl_rl's logger, which concatenates
-        them over an iteration, weighs every episode equally.
+        them over an iteration, weighs every episode equally: success and toppled at the end, and
+        per constraint group the fraction of the episode's steps with a violated column (Table II).
         """
         log: dict[str, float | torch.Tensor] = {}
+        groups = torch.split(self.constraints_t > 0.0, self._group_sizes, dim=1)
+        self._violated_steps += torch.stack([g.any(dim=1) for g in groups], dim=1)
+        self._steps_in_episode += 1.0
         ended = self.episode_success_t >= 0
         if bool(ended.any()):
+            fraction = self._violated_steps[ended] / self._steps_in_episode[ended, None]
+            for i, (name, _) in enumerate(CONSTRAINT_GROUPS):
+                log[f"/episode/violated/{name}"] = fraction[:, i]
+            self._violated_steps[ended] = 0.0
+            self._steps_in_episode[ended] = 0.0
             succeeded = (self.episode_success_t[ended] == 1).float()
             self._episodes_ended += int(succeeded.numel())
             self._episodes_succeeded += int(succeeded.sum())

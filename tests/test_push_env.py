@@ -137,3 +137,15 @@ def test_set_goals_keeps_the_bodies_and_restarts_the_clock(small_env):
     assert env.success_t.tolist()[1] == 1
     with pytest.raises(ConfigError, match="goal of world 0"):
         env.set_goals({0: (0.0, float("nan"), 0.0)})
+
+
+def test_episode_metrics_report_the_fraction_of_violated_steps():
+    env = PushEnv(PushEnvConfig(num_envs=2, episode_length_s=0.2, seed=3))
+    env.set_episodes({0: EpisodeSpec(base=(-2.0, 0.0, 0.0)), 1: EpisodeSpec(base=(-2.0, 0.0, 0.0))})
+    actions = torch.zeros(2, 11)
+    actions[0, 0] = 5.0  # vx command 5 m/s: beyond the base command limit (1 m/s) in every step
+    for _ in range(10):
+        _, _, _, extras = env.step(actions)
+    log = extras["log"]
+    assert log["/episode/violated/base_command"].tolist() == [1.0, 0.0]
+    assert log["/episode/violated/collision"].tolist() == [0.0, 0.0]

@@ -124,9 +124,10 @@ def sample_episodes(
 ):
     """Draws the episode of every world with ``reset[w] != 0`` into ``spec`` (paper III-B, III-E).
 
-    ``goal_difficulty[0]`` in [0, 1] (a training curriculum; 1 is the paper's task) interpolates the
-    goal pose between the object's start pose and the drawn goal: position ``d * p_goal``, yaw
-    ``yaw_object + d * wrap(yaw_goal - yaw_object)``. At 1 the goal is exactly the drawn one.
+    ``goal_difficulty[0]`` in [0, 1] (a training curriculum; 1 is the paper's task) scales the
+    reorientation the goal asks for: goal yaw ``yaw_object + d * wrap(yaw_goal - yaw_object)``; the
+    goal position is always the drawn one (a position scaled toward the start would make waiting
+    next to the object a success). At 1 the goal is exactly the drawn one.
     """
     w = wp.tid()
     if reset[w] == 0:
@@ -159,7 +160,7 @@ def sample_episodes(
     difficulty = goal_difficulty[0]
     yaw_change = wp.atan2(wp.sin(goal[2] - object_yaw), wp.cos(goal[2] - object_yaw))
     goal_yaw = wp.where(difficulty < 1.0, object_yaw + difficulty * yaw_change, goal[2])
-    spec.goal[w] = wp.vec3(difficulty * goal[0], difficulty * goal[1], goal_yaw)
+    spec.goal[w] = wp.vec3(goal[0], goal[1], goal_yaw)
     spec.base[w] = polar_pose(rng, params.robot_radius, params.robot_bearing, params.base_yaw)
     for j in range(NUM_ARM_JOINTS):
         spec.arm_q[w, j] = task.arm_default[j] + wp.randf(rng, -params.arm_joint_noise, params.arm_joint_noise)

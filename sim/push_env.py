@@ -511,7 +511,7 @@ class PushEnv(VecEnv):
             self.reset_flags.zero_()
 
     def set_goal_difficulty(self, difficulty: float) -> None:
-        """Scales the goal of episodes drawn from now on toward the object's start pose (a training
+        """Scales the yaw change the goal of episodes drawn from now on asks for (a training
         curriculum; ``kernels/sampling.py``). 1 is the paper's task."""
         if not 0.0 <= difficulty <= 1.0:
             raise ConfigError(f"goal difficulty must lie in [0, 1], got {difficulty!r}")

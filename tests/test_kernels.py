@@ -495,8 +495,8 @@ def read_struct(cls, s):
     return {name: getattr(s, name).numpy() for name, var in cls.vars.items() if wp.types.is_array(var.type)}
 
 
-def test_goal_difficulty_interpolates_from_the_object_pose():
-    """Curriculum: at difficulty d the goal is d of the way from the object's start pose to the drawn goal."""
+def test_goal_difficulty_scales_the_goal_yaw_change():
+    """Curriculum: at difficulty d the goal asks for d of the drawn yaw change; its position is unchanged."""
     n = 2000
     goals = {}
     for d in (1.0, 0.4, 0.0):
@@ -507,9 +507,9 @@ def test_goal_difficulty_interpolates_from_the_object_pose():
         goals[d] = out["goal"]
         object_yaw = out["object_yaw"]
     wrap = lambda a: np.arctan2(np.sin(a), np.cos(a))  # noqa: E731
-    close(goals[0.4][:, :2], 0.4 * goals[1.0][:, :2], atol=1e-5)
+    close(goals[0.4][:, :2], goals[1.0][:, :2], atol=0)
     close(wrap(goals[0.4][:, 2] - object_yaw), 0.4 * wrap(goals[1.0][:, 2] - object_yaw), atol=1e-4)
-    close(goals[0.0][:, :2], 0.0, atol=0)
+    close(goals[0.0][:, :2], goals[1.0][:, :2], atol=0)
     close(wrap(goals[0.0][:, 2] - object_yaw), 0.0, atol=1e-6)
 
 

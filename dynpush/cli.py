@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from pathlib import Path
 
@@ -34,15 +35,16 @@ def _env_info(args: argparse.Namespace) -> int:
 def _train(args: argparse.Namespace) -> int:
     from dynpush.policies.train import TrainConfig, apply_overrides, launch_processes, train
 
+    argv = args.argv[args.argv.index("train") + 1 :]
+    command = args.launched_as or shlex.join(["dynpush", "train", *argv])  # recorded in the run's launches.jsonl
     if args.procs > 1:  # re-run this command under torchrun, one process per shard
-        argv = sys.argv[sys.argv.index("train") + 1 :]
         drop = [i for i, a in enumerate(argv) if a == "--procs" or a.startswith("--procs=")]
         for i in reversed(drop):
             del argv[i : i + (1 if "=" in argv[i] else 2)]
-        return launch_processes(args.procs, argv)
+        return launch_processes(args.procs, [*argv, "--launched-as", command])
     cfg = apply_overrides(TrainConfig.preset_config(args.preset), args.set or [])
     name = args.name or f"{args.preset}"
-    train(cfg, Path(args.runs) / name, resume=args.resume)
+    train(cfg, Path(args.runs) / name, resume=args.resume, command=command)
     return 0
 
 
@@ -64,6 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--procs", type=int, default=1,
                    help="processes on this machine (torchrun, gloo on CPU / NCCL on GPUs); env.num_envs is split")
     p.add_argument("--set", nargs="*", metavar="FIELD=VALUE", help="override config fields, e.g. env.num_envs=256 iterations=100")
+    p.add_argument("--launched-as", default=None, help=argparse.SUPPRESS)  # the user's command, from a --procs relaunch
     p.set_defaults(func=_train)
 
     # Commands of the evaluation/export side and of the deployment runtime register themselves.
@@ -78,7 +81,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     from dynpush.sim.config import ConfigError
 
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
+    args.argv = argv
     try:
         return args.func(args)
     except ConfigError as error:

@@ -1,4 +1,4 @@
-"""``dynpush`` subcommands of dynpush.policies (registered by ``dynpush.cli``): export, eval, play."""
+"""``dynpush`` subcommands of dynpush.policies (registered by ``dynpush.cli``): export, eval, play, curve, ship."""
 
 from __future__ import annotations
 
@@ -83,6 +83,34 @@ def _play(args: argparse.Namespace) -> int:
     return 0
 
 
+def _curve(args: argparse.Namespace) -> int:
+    from .evaluate import paper_table_i_row
+    from .progress import SMOOTHING, plot_learning_curve
+
+    run = Path(args.run)
+    out = Path(args.out) if args.out else run / "learning_curve.png"
+    config = run / "config.json"
+    paper = paper_table_i_row(json.loads(config.read_text()))[1] if config.exists() else None
+    summary = plot_learning_curve(run, out, paper)
+    print(f"{summary['iterations']} iterations in {summary['hours']:.2f} h: success {summary['success_percent']:.1f} %,"
+          f" toppled {summary['toppled_percent']:.1f} % (mean of the last {SMOOTHING} iterations); wrote {out}")
+    return 0
+
+
+def _ship(args: argparse.Namespace) -> int:
+    from dynpush.shipped import SHIPPED_DIR
+
+    from .ship import ship
+
+    out = Path(args.to) if args.to else SHIPPED_DIR
+    record = ship(Path(args.run), out, args.checkpoint, args.episodes, args.seed)
+    evaluation = record["evaluation"]
+    print(f"shipped {record['run']}/{record['checkpoint']} ({record['iterations']} iterations,"
+          f" {record['training_wall_clock_h']:.2f} h): success {evaluation['success_percent']:.2f} %,"
+          f" toppled {evaluation['toppled_percent']:.2f} % over {evaluation['episodes']} episodes; wrote {out}")
+    return 0
+
+
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("policy", help="policy.onnx written by dynpush export")
     p.add_argument("--noise", action=argparse.BooleanOptionalAction, default=None,
@@ -120,3 +148,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default=None, help="PNG file (default: play.png beside the policy)")
     p.add_argument("--usd", default=None, help="also record the rollout as a USD animation (out.usda text, out.usdc binary)")
     p.set_defaults(func=_play)
+
+    p = subparsers.add_parser("curve", help="learning curve of a run: success and rewards vs wall-clock hours (PNG)")
+    p.add_argument("run", help="run folder (runs/NAME with progress.jsonl)")
+    p.add_argument("--out", default=None, help="PNG file (default: RUN/learning_curve.png)")
+    p.set_defaults(func=_curve)
+
+    p = subparsers.add_parser("ship", help="export a run's policy into the package with its eval, curve and provenance")
+    p.add_argument("run", help="run folder (runs/NAME)")
+    p.add_argument("--checkpoint", default=None, help="checkpoint file in the run folder (default: the latest model_K.pt)")
+    p.add_argument("--episodes", type=int, default=4096, help="evaluation episodes (paper: 4096)")
+    p.add_argument("--seed", type=int, default=0, help="evaluation seed")
+    p.add_argument("--to", default=None, help="output folder (default: the installed package's dynpush/shipped)")
+    p.set_defaults(func=_ship)

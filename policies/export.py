@@ -166,7 +166,8 @@ def export_policy(run_dir: Path, checkpoint: str | None = None, out: Path | None
     onnx.helper.set_model_props(model, metadata)
     model.doc_string = f"dynpush push policy from {run_dir.name}/{checkpoint_path.name}; contract in metadata_props"
     onnx.checker.check_model(model)
-    onnx.save(model, str(out))
+    onnx.save(model, str(out))  # one self-contained file: the weights are inlined again
+    out.with_name(out.name + ".data").unlink(missing_ok=True)  # the exporter's external weights, now stale
     return out
 
 

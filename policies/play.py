@@ -123,6 +123,34 @@ class TrajectoryObserver:
             self.viewer.close()
 
 
+def episode_setup(env: PushEnv, world: int) -> dict:
+    """The object and goal of ``world``'s current episode (read right after its reset)."""
+    task = env.task
+    return {"shape": SHAPES[int(task.object_shape.numpy()[world])], "dims_m": task.object_dims.numpy()[world].tolist(),
+            "mass_kg": float(task.object_mass.numpy()[world]),
+            "goal": [*task.goal_pos.numpy()[world, :2].tolist(), float(yaw_of(task.goal_quat.numpy()[world:world + 1])[0])]}
+
+
+def episode_row(setup: dict, dt: float, success: bool, toppled: bool, length_steps: int, first_success_step: int) -> dict:
+    """One episode of the play/demo JSON and PNG: its setup plus the outcome (times in s)."""
+    return {**setup, "success": success, "toppled": toppled, "length_s": length_steps * dt,
+            "time_to_success_s": first_success_step * dt if first_success_step else None}
+
+
+def concatenate_episodes(paths: list[Trajectories]) -> Trajectories:
+    """Side by side (as worlds) the one-world paths of consecutive episodes, padded with NaN to the longest."""
+    steps = max(len(p.base) for p in paths)
+
+    def stacked(name: str) -> list[np.ndarray]:
+        columns = []
+        for p in paths:
+            rows = np.concatenate(getattr(p, name), axis=0)  # (steps of this episode, k)
+            columns.append(np.vstack([rows, np.full((steps - len(rows), rows.shape[1]), np.nan)]))
+        return list(np.stack(columns, axis=1))  # steps x (episodes, k)
+
+    return Trajectories(stacked("base"), stacked("ee"), stacked("object"))
+
+
 def play(policy_path: Path, episodes: int, out: Path, usd: Path | None = None, noise: bool | None = None,
          seed: int = 0, overrides: tuple[str, ...] = ()) -> dict:
     """Rolls out ``episodes`` first episodes (one per world); writes the PNG ``out``, a JSON beside it, and ``usd``."""
@@ -130,21 +158,13 @@ def play(policy_path: Path, episodes: int, out: Path, usd: Path | None = None, n
     env = PushEnv(env_config_for(policy, episodes, noise, "cpu", seed, overrides))
     env.reset(randomize_episode_step=False)
     observer = TrajectoryObserver(env, usd)
-    task = env.task
-    setup = {"goal": task.goal_pos.numpy().copy(), "goal_yaw": yaw_of(task.goal_quat.numpy()),
-             "dims": task.object_dims.numpy().copy(), "mass": task.object_mass.numpy().copy()}
+    setups = [episode_setup(env, w) for w in range(episodes)]
     try:
         outcome = run_first_episodes(env, policy, [observer], started=True)
     finally:
         observer.close()
-    dt = env.cfg.control_dt
-    rows = []
-    for w in range(episodes):
-        rows.append({"shape": SHAPES[outcome.shape[w]], "dims_m": setup["dims"][w].tolist(),
-                     "mass_kg": float(setup["mass"][w]), "success": bool(outcome.success[w]),
-                     "toppled": bool(outcome.toppled[w]), "length_s": float(outcome.length[w] * dt),
-                     "time_to_success_s": float(outcome.first_success_step[w] * dt) if outcome.first_success_step[w] else None,
-                     "goal": [*setup["goal"][w, :2].tolist(), float(setup["goal_yaw"][w])]})
+    rows = [episode_row(setups[w], env.cfg.control_dt, bool(outcome.success[w]), bool(outcome.toppled[w]),
+                        int(outcome.length[w]), int(outcome.first_success_step[w])) for w in range(episodes)]
     result = {"policy": str(policy_path), "episodes": rows, "usd": str(usd) if usd else None}
     out.parent.mkdir(parents=True, exist_ok=True)
     out.with_suffix(".json").write_text(json.dumps(result, indent=2, allow_nan=False))

@@ -1,4 +1,5 @@
-"""rsl_rl's logger with a progress bar and a one-line summary per iteration instead of its console block."""
+"""Training progress: rsl_rl's logger with a progress bar and a one-line summary per iteration instead
+of its console block, writing ``progress.jsonl``; and the learning curve drawn from that file."""
 
 from __future__ import annotations
 
@@ -7,10 +8,15 @@ import io
 import json
 import os
 import time
+from pathlib import Path
 
+import numpy as np
 import torch
 from rsl_rl.utils.logger import Logger
 from tqdm import tqdm
+
+BREAK_FACTOR = 5.0  # learning curve: a gap this many times an iteration's own time is a pause between sittings
+SMOOTHING = 25  # learning curve: iterations averaged per point
 
 GROUP_ABBREVIATIONS = {
     "base_command": "base", "arm_command": "arm", "arm_action_rate": "rate", "arm_joint_position": "q",
@@ -68,3 +74,86 @@ class ProgressLogger(Logger):
         if it + 1 >= total_it:
             self.bar.close()
             self.bar = None
+
+
+def read_progress(run_dir: Path) -> list[dict]:
+    """The records of ``progress.jsonl``, one per iteration (a re-run iteration after a resume keeps its last)."""
+    path = Path(run_dir) / "progress.jsonl"
+    if not path.exists():
+        raise FileNotFoundError(f"{path} not found: not a training run folder (dynpush train writes it)")
+    records = {}
+    for number, line in enumerate(path.read_text().splitlines(), 1):
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError as error:
+            raise ValueError(f"{path}:{number}: not a JSON line ({error})") from error
+        records[record["iteration"]] = record
+    return [records[it] for it in sorted(records)]
+
+
+def wall_clock_hours(records: list[dict]) -> np.ndarray:
+    """Training wall-clock [h] at the end of each record's iteration.
+
+    An iteration lasts the time between consecutive records; across a pause between sittings (a gap
+    longer than ``BREAK_FACTOR`` times the iteration's own rollout + update time) it counts that time only.
+    """
+    seconds = [records[0]["collect_s"] + records[0]["learn_s"]] if records else []
+    for previous, record in zip(records, records[1:]):
+        own = record["collect_s"] + record["learn_s"]
+        gap = record["time"] - previous["time"]
+        seconds.append(gap if 0.0 < gap < BREAK_FACTOR * own else own)
+    return np.cumsum(seconds) / 3600.0
+
+
+def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float | None = None) -> dict:
+    """Success, topple and reward curves of a run against training wall-clock hours; writes the PNG ``out``.
+
+    Episode rates are of the episodes that ended in each iteration (smoothed over ``SMOOTHING`` iterations).
+    Returns the final smoothed figures.
+    """
+    from matplotlib.figure import Figure
+
+    records = read_progress(run_dir)
+    if not records:
+        raise ValueError(f"{run_dir}/progress.jsonl has no iterations yet")
+    hours = wall_clock_hours(records)
+
+    def series(key: str) -> np.ndarray:
+        return np.array([r.get(key, np.nan) for r in records], dtype=float)
+
+    def smooth(values: np.ndarray) -> np.ndarray:
+        out = np.empty_like(values)
+        for i in range(len(values)):
+            window = values[max(0, i - SMOOTHING + 1): i + 1]
+            out[i] = np.nanmean(window) if np.isfinite(window).any() else np.nan
+        return out
+
+    success, toppled = smooth(100.0 * series("/episode/success")), smooth(100.0 * series("/episode/toppled"))
+    difficulty = series("/curriculum/goal_difficulty")
+    fig = Figure(figsize=(8.0, 7.5), layout="constrained")
+    ax_rate, ax_reward, ax_delta = fig.subplots(3, 1, sharex=True)
+    ax_rate.plot(hours, success, color="tab:green", label="success (episodes ended in the iteration)")
+    ax_rate.plot(hours, toppled, color="tab:red", label="toppled")
+    if paper_success_percent is not None:
+        ax_rate.axhline(paper_success_percent, color="tab:green", ls=":", label=f"paper success {paper_success_percent} %")
+    if np.isfinite(difficulty).any():
+        ax_rate.plot(hours, 100.0 * difficulty, color="gray", ls="--", label="curriculum goal difficulty x 100")
+    ax_rate.set_ylabel("% of ended episodes")
+    ax_rate.set_ylim(-2, 102)
+    ax_rate.legend(fontsize=8, loc="upper left")
+    for key, color in (("/reward/task", "tab:blue"), ("/reward/reach", "tab:orange"), ("/reward/object_velocity", "tab:purple")):
+        ax_reward.plot(hours, smooth(series(key)), color=color, label=key.rsplit("/", 1)[-1] + " reward term (unweighted, mean over worlds)")
+    ax_reward.set_ylabel("reward")
+    ax_reward.legend(fontsize=8, loc="upper left")
+    ax_delta.plot(hours, smooth(series("CaT/mean_delta")), color="k", label="CaT mean termination probability delta")
+    ax_delta.set_ylabel("delta")
+    ax_delta.set_xlabel("training wall-clock [h]")
+    ax_delta.legend(fontsize=8, loc="upper left")
+    for ax in (ax_rate, ax_reward, ax_delta):
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"{Path(run_dir).name}: {len(records)} iterations in {hours[-1]:.2f} h"
+                 f" (smoothed over {SMOOTHING} iterations)")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    return {"iterations": len(records), "hours": float(hours[-1]), "success_percent": float(success[-1]),
+            "toppled_percent": float(toppled[-1])}

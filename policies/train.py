@@ -191,7 +191,7 @@ class ProcessGroup:
         return dataclasses.replace(env, num_envs=env.num_envs // self.world_size, seed=env.seed + self.rank)
 
 
-def train(cfg: TrainConfig, run_dir: Path, resume: bool = False) -> CaTOnPolicyRunner:
+def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, command: str | None = None) -> CaTOnPolicyRunner:
     """Trains (or resumes) a push policy into ``run_dir``; saves on Ctrl-C / SIGTERM.
 
     Under torchrun every process runs one shard of ``cfg.env.num_envs`` worlds; gradients and
@@ -209,6 +209,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False) -> CaTOnPolicyR
     if group.rank == 0:
         run_dir.mkdir(parents=True, exist_ok=True)
         config_path.write_text(json.dumps(cfg.to_dict(), indent=2))
+        record_launch(run_dir, command, group.world_size, resume)
     if cfg.env.device == "cpu":
         torch.set_num_threads(1)  # one core per process: Warp launches already use one
 
@@ -239,6 +240,30 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False) -> CaTOnPolicyR
     finally:
         signal.signal(signal.SIGTERM, previous)
     return runner
+
+
+def source_commit() -> str | None:
+    """The git commit of the dynpush sources (with ``-dirty`` when they have uncommitted changes), or None."""
+    import subprocess
+
+    root = Path(__file__).resolve().parent.parent
+    try:
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root, capture_output=True,
+                               text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return commit + ("-dirty" if dirty else "")
+
+
+def record_launch(run_dir: Path, command: str | None, procs: int, resume: bool) -> None:
+    """Appends this launch (the ``dynpush train`` command line, processes, commit, time) to ``launches.jsonl``."""
+    import time
+
+    record = {"command": command, "processes": procs, "resume": resume, "commit": source_commit(),
+              "torch": torch.__version__, "time": time.time()}
+    with open(run_dir / "launches.jsonl", "a") as f:
+        f.write(json.dumps(record) + "\n")
 
 
 def launch_processes(procs: int, argv: list[str]) -> int:

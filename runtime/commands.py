@@ -1,4 +1,4 @@
-"""``dynpush`` subcommands of dynpush.runtime (registered by ``dynpush.cli``): run, replay, sim2sim.
+"""``dynpush`` subcommands of dynpush.runtime (registered by ``dynpush.cli``): run, replay, sim2sim, demo.
 
 Each prints one JSON document on stdout. Invalid configs, failed start-up checks and unreadable logs
 end with a message on stderr and exit status 2.
@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import signal
 import sys
 import threading
@@ -61,7 +62,7 @@ def _sim2sim(args: argparse.Namespace) -> int:
     options = SimToSimOptions(policy=args.policy, episodes=args.episodes, mocap_noise_m=args.mocap_noise,
                               mocap_noise_rad=args.mocap_noise_rad, latency_s=args.latency, drop=args.drop,
                               lockstep=args.lockstep, seed=args.seed, config=args.config, overrides=args.set or [],
-                              log_dir=args.log_dir)
+                              log_dir=args.log_dir, trajectory_png=args.png)
     try:
         report = run_sim2sim(options)
     except (RuntimeConfigError, StartupError) as error:
@@ -70,6 +71,41 @@ def _sim2sim(args: argparse.Namespace) -> int:
     if args.out:
         Path(args.out).write_text(text)
     print(text)
+    return 0 if report["completed"] else 1
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from dynpush.shipped import shipped_file, training_record
+
+    from .config import RuntimeConfigError
+    from .errors import StartupError
+    from .sim2sim import SimToSimOptions, run_sim2sim
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    record = training_record()
+    options = SimToSimOptions(policy=str(shipped_file("policy.onnx")), episodes=args.episodes, lockstep=args.lockstep,
+                              seed=args.seed, overrides=args.set or [], log_dir=str(out),
+                              trajectory_png=str(out / "demo.png"))
+    print(f"dynpush demo: the shipped policy ({record['run']}, {record['iterations']} iterations) through the deployment"
+          f" runtime against the simulator, {args.episodes} episodes"
+          f" ({'lock-step' if args.lockstep else 'real time, 50 Hz'})", file=sys.stderr)
+    try:
+        report = run_sim2sim(options)
+    except (RuntimeConfigError, StartupError) as error:
+        return _fail(error)
+    (out / "demo.json").write_text(json.dumps(report, indent=1))
+    for episode in report["episode_results"]:
+        outcome = (f"success at {episode['time_to_success_s']:.1f} s" if episode["success"]
+                   else "toppled" if episode["toppled"] else "failed")
+        print(f"episode {episode['index']}: {episode['shape']} {episode['mass_kg']:.1f} kg,"
+              f" goal {math.hypot(*episode['goal'][:2]):.2f} m from its start -> {outcome}")
+    evaluation = record["evaluation"]
+    rate = report["success_rate"]
+    print(f"success {100.0 * rate:.0f} % of {report['episodes']} episodes" if rate is not None else "no episode completed")
+    print(f"(shipped evaluation: {evaluation['success_percent']:.2f} % of {evaluation['episodes']} episodes;"
+          f" paper {evaluation['paper']['success_rate']} %)")
+    print(f"wrote {out / 'demo.png'} and {out / 'demo.json'}")
     return 0 if report["completed"] else 1
 
 
@@ -98,4 +134,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--set", nargs="*", metavar="env.FIELD=VALUE", help="simulator overrides, e.g. env.episode_length_s=10.0")
     p.add_argument("--log-dir", default="runs/sim2sim", help="folder of the runtime's tick log")
     p.add_argument("--out", default=None, help="also write the report to this JSON file")
+    p.add_argument("--png", default=None, help="top-down picture of the episodes' paths (as dynpush play draws them)")
     p.set_defaults(func=_sim2sim)
+
+    p = subparsers.add_parser("demo", help="the shipped policy through the runtime against the simulator (offline)")
+    p.add_argument("--episodes", type=int, default=4)
+    p.add_argument("--lockstep", action="store_true", help="simulated time, as fast as it runs (default: real time)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--set", nargs="*", metavar="env.FIELD=VALUE", help="simulator overrides, e.g. env.episode_length_s=10.0")
+    p.add_argument("--out", default="runs/demo", help="folder of demo.png, demo.json and the runtime's tick log")
+    p.set_defaults(func=_demo)

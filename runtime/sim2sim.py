@@ -40,6 +40,7 @@ class SimToSimOptions:
     config: str | None = None  # a runtime YAML to start from (safety, rates, timeouts...)
     overrides: list[str] = field(default_factory=list)  # simulator environment overrides, env.field=value
     log_dir: str = "runs/sim2sim"
+    trajectory_png: str | None = None  # the simulator draws the episodes' paths here
 
     def validate(self) -> None:
         if self.episodes < 1:
@@ -76,6 +77,7 @@ def _simulator_config(options: SimToSimOptions, runtime: Runtime) -> dict:
         "mocap_noise_rad": options.mocap_noise_rad, "latency_s": options.latency_s, "drop": options.drop,
         "lockstep": options.lockstep, "seed": options.seed, "base_body": mocap.base_body,
         "object_body": mocap.object_body, "overrides": list(options.overrides),
+        "trajectory_png": str(Path(options.trajectory_png).resolve()) if options.trajectory_png else None,
     }
 
 
@@ -126,6 +128,7 @@ def run_sim2sim(options: SimToSimOptions) -> dict:
                        "mocap_noise_rad": options.mocap_noise_rad, "latency_s": options.latency_s,
                        "drop": options.drop, "seed": options.seed, "overrides": options.overrides},
         "episode_results": episodes,
+        "trajectory_png": done[0]["trajectory_png"] if done else None,
         "simulator": done[0] if done else None,
         "runtime": summary,
     }

@@ -23,8 +23,9 @@ training config of the policy's metadata, one world, observation noise off, ``en
 overrides). The first episode starts when the runtime reports an operating state (its start-up ramp
 is over); an episode ends at the environment's time-out, topple or fall (auto-reset inside the step)
 and succeeds if the success flag is set at its last step, as in ``dynpush eval``. Every episode is
-reported as one stdout line ``SIM2SIM {json}``; ``{"event": "done"}`` ends the run, also early when the
-runtime reports its latched STOPPED state.
+reported as one stdout line ``SIM2SIM {json}`` (outcome, object and goal); ``{"event": "done"}`` ends the
+run, also early when the runtime reports its latched STOPPED state. With ``trajectory_png`` the paths of
+base, end-effector and object of every episode are drawn as ``dynpush play`` draws them.
 
 Clock: real time (an absolute-deadline ticker at the control rate), or lock-step (one step per command
 received, for tests).
@@ -38,11 +39,13 @@ import math
 import sys
 from collections import deque
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import torch
 
 from dynpush.policies.evaluate import EnvProbe, env_config_for
+from dynpush.policies.play import TrajectoryObserver, concatenate_episodes, episode_row, episode_setup, plot_play
 from dynpush.policies.export import OnnxPolicy
 from dynpush.runtime.contract import PolicyContract
 from dynpush.runtime.frames import quat_multiply
@@ -81,6 +84,7 @@ class SimToSimConfig:
     object_body: str = "object"
     overrides: list[str] = field(default_factory=list)  # env.field=value
     command_timeout_s: float = 10.0  # lock-step: give up when the runtime is silent this long
+    trajectory_png: str | None = None  # top-down picture of the episodes (dynpush.policies.play.plot_play)
 
 
 def check_contract_matches_env(contract: PolicyContract, env) -> None:
@@ -207,6 +211,7 @@ class SimRobot:
         emit({"event": "ready", "command_port": self.endpoint.port, "control_dt": self.dt})
         ticker = None if self.cfg.lockstep else Ticker(RealClock(), self.dt)
         started, episode_steps, first_success, results = False, 0, 0, 0
+        rows, paths, observer, setup = [], [], None, None
         self.publish()
         while results < self.cfg.episodes:
             self._wait(ticker)
@@ -219,22 +224,31 @@ class SimRobot:
                 episode_steps += 1
                 if first_success == 0 and int(env.success_t[0]) != 0:
                     first_success = episode_steps
-                if int(env.reset_t[0]) != 0:
+                ended = int(env.reset_t[0]) != 0
+                observer.observe(episode_steps - 1, torch.tensor([True]), torch.tensor([not ended]))
+                if ended:
                     results += 1
                     timed_out, toppled = bool(env.time_out_t[0]), bool(env.episode_toppled_t[0])
-                    emit({"event": "episode", "index": results - 1, "success": int(env.episode_success_t[0]) == 1,
-                          "first_success_step": first_success, "steps": episode_steps, "toppled": toppled,
-                          "fallen": not (timed_out or toppled)})
+                    success = int(env.episode_success_t[0]) == 1
+                    rows.append(episode_row(setup, self.dt, success, toppled, episode_steps, first_success))
+                    paths.append(observer.paths)
+                    emit({"event": "episode", "index": results - 1, **rows[-1], "first_success_step": first_success,
+                          "steps": episode_steps, "fallen": not (timed_out or toppled)})
                     episode_steps, first_success = 0, 0
                     if results < self.cfg.episodes:
                         self.send_goal()
+                        observer, setup = TrajectoryObserver(env), episode_setup(env, 0)
             elif self.command is not None and self.command.state in OPERATING_STATES:
                 env.reset()
                 started = True
                 self.send_goal()
+                observer, setup = TrajectoryObserver(env), episode_setup(env, 0)
             self.publish()
+        if self.cfg.trajectory_png and rows:
+            plot_play({"policy": self.cfg.policy, "episodes": rows}, concatenate_episodes(paths), Path(self.cfg.trajectory_png))
         emit({"event": "done", "steps": self.step, "episodes": results, "runtime_stopped": results < self.cfg.episodes,
-              "malformed_commands": self.malformed_commands})
+              "malformed_commands": self.malformed_commands,
+              "trajectory_png": self.cfg.trajectory_png if rows else None})
 
     def close(self) -> None:
         self.endpoint.close()

@@ -1,6 +1,8 @@
-"""dynpush train: config overrides, exact resume, interrupted runs, corrupted checkpoints."""
+"""dynpush train: config overrides, exact resume, interrupted runs, corrupted checkpoints, the learning curve."""
 
+import json
 
+import numpy as np
 import pytest
 import torch
 
@@ -92,3 +94,27 @@ def test_curriculum_run_starts_easy_and_eval_envs_stay_at_the_papers_task(tmp_pa
     runner = train(cfg, tmp_path / "run")
     assert 0.2 <= runner.env.goal_difficulty_value <= 0.25
     assert PushEnv(PushEnvConfig(num_envs=1)).goal_difficulty_value == 1.0
+
+
+def test_learning_curve_counts_pauses_between_sittings_as_the_iteration_only(tmp_path):
+    from dynpush.cli import main
+    from dynpush.policies.progress import read_progress, wall_clock_hours
+
+    run = tmp_path / "run"
+    run.mkdir()
+    rows = [  # iteration 2 was interrupted and re-run after a 2-hour pause
+        {"iteration": 0, "time": 100.0, "collect_s": 1.0, "learn_s": 1.0, "/episode/success": 0.0},
+        {"iteration": 1, "time": 103.0, "collect_s": 1.0, "learn_s": 1.0, "/episode/success": 0.5},
+        {"iteration": 2, "time": 106.0, "collect_s": 1.0, "learn_s": 1.0},
+        {"iteration": 2, "time": 7306.0, "collect_s": 1.5, "learn_s": 1.0, "/episode/success": 1.0},
+        {"iteration": 3, "time": 7309.0, "collect_s": 1.0, "learn_s": 1.0, "/episode/success": 1.0},
+    ]
+    (run / "progress.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    records = read_progress(run)
+    assert [r["iteration"] for r in records] == [0, 1, 2, 3] and records[2]["time"] == 7306.0
+    np.testing.assert_allclose(wall_clock_hours(records) * 3600.0, [2.0, 5.0, 7.5, 10.5])
+    assert main(["curve", str(run), "--out", str(tmp_path / "curve.png")]) == 0
+    assert (tmp_path / "curve.png").read_bytes()[:4] == b"\x89PNG"
+    (run / "progress.jsonl").write_text("{not json\n")
+    with pytest.raises(ValueError, match="progress.jsonl:1: not a JSON line"):
+        read_progress(run)

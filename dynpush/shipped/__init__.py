@@ -1,0 +1,35 @@
+"""The push policy shipped with dynpush, its evaluation and its provenance.
+
+``dynpush demo`` runs ``policy.onnx`` through the deployment runtime against the simulator. The files
+beside it are written together by ``dynpush ship RUN`` (``dynpush.policies.ship``):
+
+- ``policy.onnx``: the exported actor, contract in its metadata;
+- ``training.json``: the exact ``dynpush train`` command(s), seed, commit, checkpoint, training
+  wall-clock and world-steps, and the evaluation summary;
+- ``training_config.json``: the run's full training config;
+- ``eval.json`` / ``eval.png``: ``dynpush eval`` on the training distribution (paper Tables I/II);
+- ``learning_curve.png``: success and rewards against training wall-clock hours.
+
+Only the standard library here: the deployment runtime imports this module.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+SHIPPED_DIR = Path(__file__).resolve().parent
+
+
+def shipped_file(name: str) -> Path:
+    """The shipped file ``name`` (e.g. ``policy.onnx``); FileNotFoundError naming it when absent."""
+    path = SHIPPED_DIR / name
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} is missing: this dynpush installation ships no {name}"
+                                " (write it with dynpush ship RUN)")
+    return path
+
+
+def training_record() -> dict:
+    """The contents of ``training.json``."""
+    return json.loads(shipped_file("training.json").read_text())

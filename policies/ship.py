@@ -1,0 +1,60 @@
+"""``dynpush ship``: export a run's policy into the package with its evaluation and provenance.
+
+One step, so the shipped files always belong together (``dynpush.shipped``): the checkpoint is
+exported to ``policy.onnx``, evaluated with ``dynpush eval`` on the training distribution (4096
+episodes by default, paper IV-A), the learning curve is drawn from ``progress.jsonl``, and
+``training.json`` records the training command(s) from ``launches.jsonl``, the seed, the commit, the
+checkpoint, the training wall-clock and world-steps, and the evaluation summary.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import torch
+
+from .evaluate import EvalConfig, evaluate
+from .export import OnnxPolicy, export_policy, load_run_config, resolve_checkpoint
+from .progress import plot_learning_curve, read_progress, wall_clock_hours
+
+
+def read_launches(run_dir: Path) -> list[dict]:
+    """The ``dynpush train`` launches of a run (``launches.jsonl``), oldest first."""
+    path = run_dir / "launches.jsonl"
+    if not path.exists():
+        raise FileNotFoundError(f"{path} not found: the run's training command is unknown (dynpush train writes it)")
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: int = 4096, seed: int = 0) -> dict:
+    """Writes the shipped files of ``run_dir``'s checkpoint (default: the latest) into ``out_dir``; returns training.json."""
+    run_dir = Path(run_dir)
+    cfg = load_run_config(run_dir)
+    checkpoint_path = resolve_checkpoint(run_dir, checkpoint)
+    launches = read_launches(run_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    policy_path = export_policy(run_dir, checkpoint_path.name, out_dir / "policy.onnx")
+    result = evaluate(policy_path, EvalConfig(episodes=episodes, seed=seed), out_dir)
+    plot_learning_curve(run_dir, out_dir / "learning_curve.png", result["paper"]["success_rate"])
+    iteration = int(torch.load(checkpoint_path, weights_only=False, map_location="cpu")["iter"])  # completed iterations
+    trained = [r for r in read_progress(run_dir) if r["iteration"] < iteration]
+    shutil.copyfile(run_dir / "config.json", out_dir / "training_config.json")
+    record = {
+        "run": run_dir.name,
+        "commands": [launch["command"] for launch in launches],
+        "launches": launches,
+        "seed": cfg.env.seed,
+        "checkpoint": checkpoint_path.name,
+        "iterations": iteration,
+        "world_steps": iteration * cfg.num_steps_per_env * cfg.env.num_envs,
+        "training_wall_clock_h": float(wall_clock_hours(trained)[-1]) if trained else 0.0,
+        "training_config_sha256": OnnxPolicy(policy_path).contract.training_config_sha256,
+        "evaluation": {"episodes": result["episodes"], "success_percent": result["success_rate"],
+                       "toppled_percent": result["toppled_rate"],
+                       "constraint_violation_percent": result["constraint_violation_percent"],
+                       "paper": result["paper"]},
+    }
+    (out_dir / "training.json").write_text(json.dumps(record, indent=2))
+    return record

@@ -1,4 +1,4 @@
-"""USD assets of dynpush: the robot, the two push objects and the ground.
+"""USD assets of dynpush: the robot (tracked-base and legged variants), the two push objects and the ground.
 
 The files are written by :mod:`dynpush.assets_usd.generate` (run
 ``python -m dynpush.assets_usd.generate``); see its module docstring for every number,
@@ -12,6 +12,7 @@ from pathlib import Path
 _HERE = Path(__file__).resolve().parent
 
 ROBOT_USD: Path = _HERE / "robot.usda"
+ROBOT_LEGGED_USD: Path = _HERE / "robot_legged.usda"
 CUBOID_USD: Path = _HERE / "object_cuboid.usda"
 CYLINDER_USD: Path = _HERE / "object_cylinder.usda"
 GROUND_USD: Path = _HERE / "ground.usda"
@@ -32,12 +33,17 @@ LEG_SHAPE_NAMES: tuple[str, ...] = (
     "RH_shank",
 )
 
+#: Revolute leg joints of ``robot_legged.usda`` (prim names under ``/Robot/joints``), legs LF, RF, LH, RH.
+LEG_JOINT_NAMES: tuple[str, ...] = tuple(f"{leg}_{joint}" for leg in ("LF", "RF", "LH", "RH") for joint in ("HAA", "HFE", "KFE"))
+
 __all__ = [
     "ARM_JOINT_NAMES",
     "ARM_LINK_NAMES",
     "CUBOID_USD",
     "CYLINDER_USD",
     "GROUND_USD",
+    "LEG_JOINT_NAMES",
     "LEG_SHAPE_NAMES",
+    "ROBOT_LEGGED_USD",
     "ROBOT_USD",
 ]

@@ -1,6 +1,6 @@
 """Generator for the dynpush USD assets (robot, two push objects, ground).
 
-Run ``python -m dynpush.assets_usd.generate`` to (re)write ``robot.usda``,
+Run ``python -m dynpush.assets_usd.generate`` to (re)write ``robot.usda``, ``robot_legged.usda``,
 ``object_cuboid.usda``, ``object_cylinder.usda`` and ``ground.usda`` beside this file
 (``--out DIR`` writes elsewhere, ``--check`` also runs the USD validators).  The output is
 deterministic: every computed number is rounded to 1e-9 before it is authored, and the
@@ -107,6 +107,27 @@ simplified stand-ins:
   (0.7469, 0.0, 0.3483) m in the world with the base at its nominal pose (0, 0, 0.50):
   0.447 m in front of the base front face (x = 0.30) and 0.348 m above the ground.
 
+Legged robot (``robot_legged.usda``, for the legged mode and locomotion training)
+-------------------------------------------------------------------------------
+The same robot with articulated legs instead of leg colliders on the base: per leg three bodies
+``<leg>_HIP`` (1.4 kg), ``<leg>_THIGH`` (1.6 kg), ``<leg>_SHANK`` (0.5 kg) and three revolute
+joints ``<leg>_HAA`` (axis x, at the hip point), ``<leg>_HFE`` (axis y, at the thigh start) and
+``<leg>_KFE`` (axis y, at the knee, 0.30 m below the HFE axis at q = 0); the base keeps 36 kg so the
+robot still weighs 50 kg without the arm.  At q = 0 every leg body frame is parallel to the base
+frame and the leg points straight down; the sign convention and the nominal stance are those of
+the leg attributes above, so ``dynpush:defaultLegJointPositions`` on ``/Robot`` (float[12], rad,
+order LF HAA, HFE, KFE, RF ..., LH ..., RH ...) = (0, +-0.772294, -+1.459455) puts the feet at
+``dynpush:legNominalFootPositions``.  The bodies are authored in that stance; Newton does not
+import joint positions, so a simulator sets them.  Colliders: ``<leg>_thigh`` capsule (radius 0.06,
+0.30 m between cap centres) on the thigh; ``<leg>_shank`` capsule (radius 0.04, 0.27 m from the
+knee) and the foot sphere ``<leg>_foot`` (radius 0.03, centre 0.33 m from the knee, the only part
+meant to touch the ground) on the shank.  Limits HAA +-0.72, HFE +-1.6, KFE +-2.6 rad; drives
+(ANYmal-like, legged_gym's PD gains): peak effort 80 N m, 7.5 rad/s, stiffness 80 N m/rad, damping
+2 N m s/rad.  Leg links get 0.02 kg m^2 on every diagonal inertia entry (armature stand-in, as the
+arm).  With these gains the robot sags under its weight unless the joint targets carry the static
+torques (``tests/test_legged_asset.py`` stands it at 0.50 m with targets offset by ``tau / k_p``
+from ``dynpush.sim.leg_statics``).
+
 Objects (``object_cuboid.usda``, ``object_cylinder.usda``, defaultPrim ``/Object``)
 --------------------------------------------------------------------------------
 Exactly one rigid body ``/Object/object`` (at the origin; place it at z = 0.35 to rest on
@@ -199,6 +220,23 @@ LEG_NOMINAL_FOOT_POSITIONS = tuple(
 )
 LEG_SHAPE_NAMES = tuple(f"{leg}_{part}" for leg in LEG_NAMES for part in ("thigh", "shank"))
 
+# --- articulated legs (robot_legged.usda only; ANYmal-like stand-ins, see the module docstring) ---
+LEG_JOINT_NAMES = tuple(f"{leg}_{joint}" for leg in LEG_NAMES for joint in ("HAA", "HFE", "KFE"))
+LEG_BODY_NAMES = tuple(f"{leg}_{part}" for leg in LEG_NAMES for part in ("HIP", "THIGH", "SHANK"))
+LEG_FOOT_NAMES = tuple(f"{leg}_foot" for leg in LEG_NAMES)
+LEG_LINK_MASSES = (1.4, 1.6, 0.5)  # hip, thigh, shank [kg]; 3.5 kg per leg
+LEG_LIMITS = ((-0.72, 0.72), (-1.6, 1.6), (-2.6, 2.6))  # HAA, HFE, KFE [rad]
+LEG_EFFORT_LIMIT = 80.0  # N m, peak (ANYmal C/D drives)
+LEG_VELOCITY_LIMIT = 7.5  # rad/s
+LEG_STIFFNESS = 80.0  # N m / rad (legged_gym's ANYmal PD gains)
+LEG_DAMPING = 2.0  # N m s / rad
+LEG_ARMATURE_INERTIA = 0.02  # kg m^2 on every diagonal entry of every leg link (XPBD ignores armature)
+SHANK_COLLIDER_LENGTH = SHANK_LENGTH - 0.06  # knee to the capsule's end centre: the foot sphere reaches lower
+LEGGED_BASE_MASS = BASE_MASS - 4.0 * sum(LEG_LINK_MASSES)  # the robot still weighs 50 kg without the arm
+DEFAULT_LEG_JOINT_POSITIONS = tuple(
+    v for hfe, kfe in zip(LEG_NOMINAL_HFE, LEG_NOMINAL_KFE, strict=True) for v in (0.0, hfe, kfe)
+)
+
 # --- arm ---
 ARM_MOUNT = (0.25, 0.0, 0.10)
 ARM_JOINT_NAMES = ("SH_ROT", "SH_FLE", "EL_FLE", "FA_ROT", "WRIST_1", "WRIST_2")
@@ -256,6 +294,7 @@ GROUND_FRICTION = 0.4
 
 FILE_NAMES = {
     "robot": "robot.usda",
+    "robot_legged": "robot_legged.usda",
     "cuboid": "object_cuboid.usda",
     "cylinder": "object_cylinder.usda",
     "ground": "ground.usda",
@@ -374,44 +413,46 @@ def _cylinder_inertia(mass, length, radius, long_axis):
     return (i_long, i_trans, i_trans) if long_axis == "x" else (i_trans, i_trans, i_long)
 
 
+def _revolute_joint(stage, name, parent_path, child_path, pos0, rot0, axis, limits_deg, effort, stiffness, damping,
+                    velocity_limit):
+    """A revolute joint ``/Robot/joints/<name>`` with a PD position drive (target 0).
+
+    Joint frame = child body frame (localPos1 = 0, localRot1 = identity); ``pos0``/``rot0`` place it in
+    the parent body. Gains are given per radian and authored per degree (UsdPhysics); the velocity
+    limit is given in rad/s and authored as ``newton:velocityLimit`` in deg/s.
+    """
+    Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt = _pxr()
+    joint = UsdPhysics.RevoluteJoint.Define(stage, f"/Robot/joints/{name}")
+    joint.CreateBody0Rel().SetTargets([Sdf.Path(parent_path)])
+    joint.CreateBody1Rel().SetTargets([Sdf.Path(child_path)])
+    joint.CreateLocalPos0Attr(Gf.Vec3f(*(_r(v) for v in pos0)))
+    joint.CreateLocalRot0Attr(Gf.Quatf(rot0[0], Gf.Vec3f(*rot0[1:])))
+    joint.CreateLocalPos1Attr(Gf.Vec3f(0.0, 0.0, 0.0))
+    joint.CreateLocalRot1Attr(Gf.Quatf(1.0, Gf.Vec3f(0.0, 0.0, 0.0)))
+    joint.CreateAxisAttr(axis)
+    joint.CreateLowerLimitAttr(_r(limits_deg[0]))
+    joint.CreateUpperLimitAttr(_r(limits_deg[1]))
+    jprim = joint.GetPrim()
+    drive = UsdPhysics.DriveAPI.Apply(jprim, "angular")
+    drive.CreateTypeAttr("force")
+    drive.CreateMaxForceAttr(effort)
+    drive.CreateTargetPositionAttr(0.0)
+    drive.CreateTargetVelocityAttr(0.0)
+    drive.CreateStiffnessAttr(_r(stiffness * math.pi / 180.0))
+    drive.CreateDampingAttr(_r(damping * math.pi / 180.0))
+    jprim.AddAppliedSchema("NewtonJointAPI")
+    vel = jprim.CreateAttribute("newton:velocityLimit", Sdf.ValueTypeNames.Float, custom=False)
+    vel.Set(_r(math.degrees(velocity_limit)))
+    return joint
+
+
 # ---------------------------------------------------------------------------------------
 # Builders
 # ---------------------------------------------------------------------------------------
 
 
-def build_robot():
-    Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt = _pxr()
-    stage, root = _new_stage("/Robot")
-    root_prim = root.GetPrim()
-    UsdPhysics.ArticulationRootAPI.Apply(root_prim)
-    _custom(
-        root_prim,
-        "dynpush:defaultArmJointPositions",
-        Sdf.ValueTypeNames.FloatArray,
-        Vt.FloatArray(list(DEFAULT_ARM_JOINT_POSITIONS)),
-        "Default pushing pose [rad], order " + ", ".join(ARM_JOINT_NAMES) + f"; EE centre at "
-        f"{DEFAULT_EE_POSITION_BASE} m in the base frame.",
-    )
-
-    # ---- base ----
-    base = UsdGeom.Xform.Define(stage, "/Robot/base")
-    _set_pose(base, translate=(0.0, 0.0, NOMINAL_BASE_HEIGHT))
-    base_prim = base.GetPrim()
-    UsdPhysics.RigidBodyAPI.Apply(base_prim)
-    sx, sy, sz = BASE_SIZE
-    _mass(
-        base_prim,
-        BASE_MASS,
-        (0.0, 0.0, 0.0),
-        (BASE_MASS * (sy**2 + sz**2) / 12.0, BASE_MASS * (sx**2 + sz**2) / 12.0, BASE_MASS * (sx**2 + sy**2) / 12.0),
-    )
-    box = UsdGeom.Cube.Define(stage, "/Robot/base/base_collision")
-    box.CreateSizeAttr(1.0)
-    box.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(-0.5), Gf.Vec3f(0.5)]))
-    _set_pose(box, scale=BASE_SIZE)
-    UsdPhysics.CollisionAPI.Apply(box.GetPrim())
-
-    # legs: capsules on the base body
+def _collider_legs(stage):
+    """Thigh and shank capsules of the four legs in the nominal stance, on the ``base`` body (robot.usda)."""
     for leg, thigh_start, knee, foot, hfe, kfe in zip(
         LEG_NAMES,
         LEG_THIGH_START_POSITIONS,
@@ -435,6 +476,85 @@ def build_robot():
         mid = tuple(0.5 * (a + b) for a, b in zip(knee, end, strict=True))
         _capsule(stage, f"/Robot/base/{leg}_shank", SHANK_RADIUS, shank_len, "Z", mid, _quat_y(shank_pitch))
 
+
+def _articulated_leg(stage, leg, hip, thigh_start, knee, hfe, kfe):
+    """Bodies ``<leg>_HIP``/``_THIGH``/``_SHANK`` (world pose = nominal stance with the base at its
+    nominal height) and joints ``<leg>_HAA`` (x), ``_HFE`` (y), ``_KFE`` (y). At q = 0 every leg body
+    frame is parallel to the base frame and the leg points straight down (-z); the thigh and shank
+    run along their body's -z axis from the joint."""
+    Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt = _pxr()
+    lift = (0.0, 0.0, NOMINAL_BASE_HEIGHT)
+    hip_mass, thigh_mass, shank_mass = LEG_LINK_MASSES
+    hfe_offset = tuple(t - h for t, h in zip(thigh_start, hip, strict=True))  # HAA -> HFE, hip frame
+    links = (  # name, origin (base frame), pitch, mass, com, length, radius
+        ("HIP", hip, 0.0, hip_mass, tuple(0.5 * v for v in hfe_offset), abs(hfe_offset[1]), THIGH_RADIUS),
+        ("THIGH", thigh_start, hfe, thigh_mass, (0.0, 0.0, -0.5 * THIGH_LENGTH), THIGH_LENGTH, THIGH_RADIUS),
+        ("SHANK", knee, hfe + kfe, shank_mass, (0.0, 0.0, -0.5 * SHANK_LENGTH), SHANK_LENGTH, SHANK_RADIUS),
+    )
+    for name, origin, pitch, mass, com, length, radius in links:
+        body = UsdGeom.Xform.Define(stage, f"/Robot/{leg}_{name}")
+        _set_pose(body, translate=tuple(o + d for o, d in zip(origin, lift, strict=True)), orient=_quat_y(pitch))
+        UsdPhysics.RigidBodyAPI.Apply(body.GetPrim())
+        inertia = tuple(v + LEG_ARMATURE_INERTIA for v in _cylinder_inertia(mass, length, radius, "z"))
+        _mass(body.GetPrim(), mass, com, inertia)
+    _capsule(stage, f"/Robot/{leg}_THIGH/{leg}_thigh", THIGH_RADIUS, THIGH_LENGTH, "Z", (0.0, 0.0, -0.5 * THIGH_LENGTH))
+    _capsule(stage, f"/Robot/{leg}_SHANK/{leg}_shank", SHANK_RADIUS, SHANK_COLLIDER_LENGTH, "Z",
+             (0.0, 0.0, -0.5 * SHANK_COLLIDER_LENGTH))
+    _sphere(stage, f"/Robot/{leg}_SHANK/{leg}_foot", FOOT_RADIUS, (0.0, 0.0, -SHANK_LENGTH))
+    limits = [tuple(math.degrees(v) for v in pair) for pair in LEG_LIMITS]
+    joints = (("HAA", "/Robot/base", "HIP", hip, "X"), ("HFE", f"/Robot/{leg}_HIP", "THIGH", hfe_offset, "Y"),
+              ("KFE", f"/Robot/{leg}_THIGH", "SHANK", (0.0, 0.0, -THIGH_LENGTH), "Y"))
+    for (joint, parent, child, pos0, axis), limit in zip(joints, limits, strict=True):
+        _revolute_joint(stage, f"{leg}_{joint}", parent, f"/Robot/{leg}_{child}", pos0, _Q_IDENTITY, axis, limit,
+                        LEG_EFFORT_LIMIT, LEG_STIFFNESS, LEG_DAMPING, LEG_VELOCITY_LIMIT)
+
+
+def build_robot(legged: bool = False):
+    """``robot.usda`` (legs as colliders on the base), or with ``legged`` ``robot_legged.usda``
+    (12 revolute leg joints, authored in the nominal stance)."""
+    Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt = _pxr()
+    stage, root = _new_stage("/Robot")
+    root_prim = root.GetPrim()
+    UsdPhysics.ArticulationRootAPI.Apply(root_prim)
+    _custom(
+        root_prim,
+        "dynpush:defaultArmJointPositions",
+        Sdf.ValueTypeNames.FloatArray,
+        Vt.FloatArray(list(DEFAULT_ARM_JOINT_POSITIONS)),
+        "Default pushing pose [rad], order " + ", ".join(ARM_JOINT_NAMES) + f"; EE centre at "
+        f"{DEFAULT_EE_POSITION_BASE} m in the base frame.",
+    )
+
+    # ---- base ----
+    base = UsdGeom.Xform.Define(stage, "/Robot/base")
+    _set_pose(base, translate=(0.0, 0.0, NOMINAL_BASE_HEIGHT))
+    base_prim = base.GetPrim()
+    UsdPhysics.RigidBodyAPI.Apply(base_prim)
+    sx, sy, sz = BASE_SIZE
+    m = LEGGED_BASE_MASS if legged else BASE_MASS
+    _mass(base_prim, m, (0.0, 0.0, 0.0), (m * (sy**2 + sz**2) / 12.0, m * (sx**2 + sz**2) / 12.0, m * (sx**2 + sy**2) / 12.0))
+    box = UsdGeom.Cube.Define(stage, "/Robot/base/base_collision")
+    box.CreateSizeAttr(1.0)
+    box.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(-0.5), Gf.Vec3f(0.5)]))
+    _set_pose(box, scale=BASE_SIZE)
+    UsdPhysics.CollisionAPI.Apply(box.GetPrim())
+
+    UsdGeom.Scope.Define(stage, "/Robot/joints")
+    if legged:
+        _custom(
+            root_prim,
+            "dynpush:defaultLegJointPositions",
+            Sdf.ValueTypeNames.FloatArray,
+            Vt.FloatArray(list(DEFAULT_LEG_JOINT_POSITIONS)),
+            "Nominal stance [rad], order " + ", ".join(LEG_JOINT_NAMES) + "; joint positions are not imported: set them.",
+        )
+        for leg, hip, thigh_start, knee, hfe, kfe in zip(
+            LEG_NAMES, LEG_HIP_POSITIONS, LEG_THIGH_START_POSITIONS, LEG_NOMINAL_KNEE_POSITIONS, LEG_NOMINAL_HFE,
+            LEG_NOMINAL_KFE, strict=True,
+        ):
+            _articulated_leg(stage, leg, hip, thigh_start, knee, hfe, kfe)
+    else:
+        _collider_legs(stage)
     _custom(
         base_prim,
         "dynpush:legHipPositions",
@@ -485,7 +605,6 @@ def build_robot():
     mount_world = (ARM_MOUNT[0], ARM_MOUNT[1], ARM_MOUNT[2] + NOMINAL_BASE_HEIGHT)
     parent_path = "/Robot/base"
     parent_frame = "base"
-    UsdGeom.Scope.Define(stage, "/Robot/joints")
     for i, link in enumerate(ARM_LINK_NAMES):
         frame = ARM_LINK_FRAME[i]
         orient = _Q_ARM_X if frame == "x" else _Q_IDENTITY
@@ -511,36 +630,14 @@ def build_robot():
             ee = UsdGeom.Xform.Define(stage, "/Robot/wrist_2/ee_frame")
             _set_pose(ee, translate=along(EE_OFFSET))
 
-        # joint: frame = child body frame (localPos1 = 0, localRot1 = identity)
-        name = ARM_JOINT_NAMES[i]
-        joint = UsdPhysics.RevoluteJoint.Define(stage, f"/Robot/joints/{name}")
-        joint.CreateBody0Rel().SetTargets([Sdf.Path(parent_path)])
-        joint.CreateBody1Rel().SetTargets([Sdf.Path(f"/Robot/{link}")])
         if i == 0:
             pos0 = ARM_MOUNT
         else:
             d = ARM_LINK_LENGTHS[i - 1]
             pos0 = (d, 0.0, 0.0) if parent_frame == "x" else (0.0, 0.0, d)
         rot0 = _Q_ARM_X if (frame == "x" and parent_frame != "x") else _Q_IDENTITY
-        joint.CreateLocalPos0Attr(Gf.Vec3f(*(_r(v) for v in pos0)))
-        joint.CreateLocalRot0Attr(Gf.Quatf(rot0[0], Gf.Vec3f(*rot0[1:])))
-        joint.CreateLocalPos1Attr(Gf.Vec3f(0.0, 0.0, 0.0))
-        joint.CreateLocalRot1Attr(Gf.Quatf(1.0, Gf.Vec3f(0.0, 0.0, 0.0)))
-        joint.CreateAxisAttr(ARM_JOINT_AXES[i])
-        lo, hi = ARM_LIMITS_DEG[i]
-        joint.CreateLowerLimitAttr(lo)
-        joint.CreateUpperLimitAttr(hi)
-        jprim = joint.GetPrim()
-        drive = UsdPhysics.DriveAPI.Apply(jprim, "angular")
-        drive.CreateTypeAttr("force")
-        drive.CreateMaxForceAttr(ARM_EFFORT_LIMITS[i])
-        drive.CreateTargetPositionAttr(0.0)
-        drive.CreateTargetVelocityAttr(0.0)
-        drive.CreateStiffnessAttr(_r(ARM_STIFFNESS[i] * math.pi / 180.0))
-        drive.CreateDampingAttr(_r(ARM_DAMPING[i] * math.pi / 180.0))
-        jprim.AddAppliedSchema("NewtonJointAPI")
-        vel = jprim.CreateAttribute("newton:velocityLimit", Sdf.ValueTypeNames.Float, custom=False)
-        vel.Set(_r(math.degrees(ARM_VELOCITY_LIMITS[i])))
+        _revolute_joint(stage, ARM_JOINT_NAMES[i], parent_path, f"/Robot/{link}", pos0, rot0, ARM_JOINT_AXES[i],
+                        ARM_LIMITS_DEG[i], ARM_EFFORT_LIMITS[i], ARM_STIFFNESS[i], ARM_DAMPING[i], ARM_VELOCITY_LIMITS[i])
         parent_path = f"/Robot/{link}"
         parent_frame = frame
     return stage
@@ -595,7 +692,7 @@ def build_ground():
     return stage
 
 
-BUILDERS = {"robot": build_robot, "cuboid": build_cuboid, "cylinder": build_cylinder, "ground": build_ground}
+BUILDERS = {"robot": build_robot, "robot_legged": lambda: build_robot(legged=True), "cuboid": build_cuboid, "cylinder": build_cylinder, "ground": build_ground}
 
 
 def usda_text(stage) -> str:

@@ -19,10 +19,11 @@ from dynpush.assets_usd import (
     CYLINDER_USD,
     GROUND_USD,
     LEG_SHAPE_NAMES,
+    ROBOT_LEGGED_USD,
     ROBOT_USD,
 )
 
-ALL_FILES = (ROBOT_USD, CUBOID_USD, CYLINDER_USD, GROUND_USD)
+ALL_FILES = (ROBOT_USD, ROBOT_LEGGED_USD, CUBOID_USD, CYLINDER_USD, GROUND_USD)
 DEG = math.pi / 180.0
 
 # --- the specification, typed in ---

@@ -34,6 +34,7 @@ def _env_info(args: argparse.Namespace) -> int:
 
 def _train(args: argparse.Namespace) -> int:
     from dynpush.policies.train import TrainConfig, apply_overrides, launch_processes, train
+    from dynpush.sim.config import ConfigError
 
     argv = args.argv[args.argv.index("train") + 1 :]
     command = args.launched_as or shlex.join(["dynpush", "train", *argv])  # recorded in the run's launches.jsonl
@@ -44,7 +45,13 @@ def _train(args: argparse.Namespace) -> int:
         return launch_processes(args.procs, [*argv, "--launched-as", command])
     cfg = apply_overrides(TrainConfig.preset_config(args.preset), args.set or [])
     name = args.name or f"{args.preset}"
-    train(cfg, Path(args.runs) / name, resume=args.resume, command=command)
+    extend_to = None
+    if args.resume and args.set:  # a resumed run keeps its config.json; only its length may change
+        fields = sorted({item.split("=", 1)[0] for item in args.set})
+        if fields != ["iterations"]:
+            raise ConfigError(f"--resume continues the run's own config; only iterations=N may be set, got {fields}")
+        extend_to = cfg.iterations
+    train(cfg, Path(args.runs) / name, resume=args.resume, command=command, extend_to=extend_to)
     return 0
 
 

@@ -191,8 +191,12 @@ class ProcessGroup:
         return dataclasses.replace(env, num_envs=env.num_envs // self.world_size, seed=env.seed + self.rank)
 
 
-def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, command: str | None = None) -> CaTOnPolicyRunner:
+def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, command: str | None = None,
+          extend_to: int | None = None) -> CaTOnPolicyRunner:
     """Trains (or resumes) a push policy into ``run_dir``; saves on Ctrl-C / SIGTERM.
+
+    A resumed run uses its own ``config.json``; ``extend_to`` changes its length to that many
+    iterations in all (schedules that scale with the run length follow the new length).
 
     Under torchrun every process runs one shard of ``cfg.env.num_envs`` worlds; gradients and
     normaliser statistics are averaged across processes (rsl_rl), rank 0 logs and saves.
@@ -205,6 +209,8 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, command: str | 
         if not config_path.exists():
             raise FileNotFoundError(f"--resume: no {config_path}; start the run without --resume first")
         cfg = TrainConfig.from_dict(json.loads(config_path.read_text()))
+        if extend_to is not None:
+            cfg.iterations = extend_to
     cfg.validate()
     if group.rank == 0:
         run_dir.mkdir(parents=True, exist_ok=True)

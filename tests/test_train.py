@@ -66,6 +66,23 @@ def test_interrupted_then_resumed_run_equals_the_uninterrupted_run(tmp_path, mon
     assert torch.equal(straight.alg.c_max, resumed.alg.c_max)
 
 
+def test_a_finished_run_continues_to_more_iterations_in_a_later_sitting(tmp_path, capsys):
+    from dynpush.cli import main
+
+    tiny_set = ["env.num_envs=8", "num_steps_per_env=6", "network.actor_hidden=(32,)", "network.critic_hidden=(32,)"]
+    assert main(["train", "--runs", str(tmp_path), "--name", "run", "--set", *tiny_set, "iterations=2"]) == 0
+    assert main(["train", "--runs", str(tmp_path), "--name", "run", "--resume", "--set", "env.num_envs=16"]) == 2
+    assert "only iterations=N may be set, got ['env.num_envs']" in capsys.readouterr().err
+    assert main(["train", "--runs", str(tmp_path), "--name", "run", "--resume", "--set", "iterations=4"]) == 0
+    saved = torch.load(tmp_path / "run" / "model_3.pt", weights_only=False)
+    assert saved["iter"] == 4
+    config = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert config["iterations"] == 4 and config["env"]["num_envs"] == 8
+    launches = [json.loads(line) for line in (tmp_path / "run" / "launches.jsonl").read_text().splitlines()]
+    assert [launch["resume"] for launch in launches] == [False, True]
+    assert launches[1]["command"].endswith("--resume --set iterations=4")
+
+
 def test_corrupted_checkpoint_is_reported(tmp_path):
     run = tmp_path / "run"
     train(tiny(1), run)

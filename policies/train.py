@@ -67,6 +67,9 @@ class TrainConfig:
     scale_schedules_with_run_length: bool = True
     # Constraint groups whose p_max is held at 0 (Table I ablation: "w/o object balance constraint").
     disabled_constraint_groups: tuple[str, ...] = ()
+    # CaT p_max curricula replacing the paper's (Table "Rewards and constraints") for some groups:
+    # group -> (initial, final), ramped like the others; e.g. {'collision': (0.1, 1.0)}.
+    p_max_overrides: dict[str, tuple[float, float]] = field(default_factory=dict)
     curriculum: GoalCurriculumConfig = field(default_factory=GoalCurriculumConfig)
 
     @staticmethod
@@ -87,9 +90,14 @@ class TrainConfig:
         for name in ("iterations", "num_steps_per_env", "save_interval"):
             if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be an integer >= 1, got {getattr(self, name)!r}")
-        unknown = set(self.disabled_constraint_groups) - {name for name, _ in CONSTRAINT_GROUPS}
-        if unknown:
-            raise ConfigError(f"disabled_constraint_groups: unknown {sorted(unknown)}; allowed: {[n for n, _ in CONSTRAINT_GROUPS]}")
+        groups = [name for name, _ in CONSTRAINT_GROUPS]
+        for field_name in ("disabled_constraint_groups", "p_max_overrides"):
+            unknown = set(getattr(self, field_name)) - set(groups)
+            if unknown:
+                raise ConfigError(f"{field_name}: unknown {sorted(unknown)}; allowed: {groups}")
+        for name, pair in self.p_max_overrides.items():
+            if len(pair) != 2 or not all(0.0 <= p <= 1.0 for p in pair):
+                raise ConfigError(f"p_max_overrides[{name!r}] must be (initial, final) within [0, 1], got {pair!r}")
         if self.ppo.schedule not in ("adaptive", "fixed"):
             raise ConfigError(f"ppo.schedule must be 'adaptive' or 'fixed', got {self.ppo.schedule!r}")
         return self
@@ -115,6 +123,7 @@ class TrainConfig:
             "schedule": {
                 "scale_with_run_length": self.scale_schedules_with_run_length,
                 "constraints": {"p_max": {**ConstraintCurriculumConfig().p_max,
+                                          **{name: tuple(pair) for name, pair in self.p_max_overrides.items()},
                                           **{name: (0.0, 0.0) for name in self.disabled_constraint_groups}}},
             },
             "curriculum": dataclasses.asdict(self.curriculum),

@@ -135,3 +135,22 @@ def test_learning_curve_counts_pauses_between_sittings_as_the_iteration_only(tmp
     (run / "progress.jsonl").write_text("{not json\n")
     with pytest.raises(ValueError, match="progress.jsonl:1: not a JSON line"):
         read_progress(run)
+
+
+def test_p_max_overrides_replace_the_papers_curriculum_of_a_group():
+    from dynpush.kernels.constraints import CONSTRAINT_GROUPS
+    from dynpush.policies.schedules import ScheduleConfig, p_max_at
+
+    cfg = apply_overrides(TrainConfig.preset_config("cpu"), ["p_max_overrides={'collision': (0.1, 1.0)}"]).validate()
+    schedule = ScheduleConfig.from_dict(cfg.runner_cfg()["schedule"])
+    names = [name for name, dim in CONSTRAINT_GROUPS for _ in range(dim)]
+    start, middle, end = (p_max_at(it, 5000, schedule) for it in (0, 1500, 3000))  # ramp: 12000 * 5000 / 20000
+    collision = [i for i, name in enumerate(names) if name == "collision"]
+    assert torch.allclose(start[collision], torch.tensor(0.1)) and torch.allclose(middle[collision], torch.tensor(0.55))
+    assert torch.allclose(end[collision], torch.tensor(1.0))
+    balance = names.index("object_balance")
+    assert start[balance] == end[balance] == pytest.approx(0.25)  # the other groups keep the paper's values
+    with pytest.raises(ConfigError, match=r"p_max_overrides: unknown \['colision'\]"):
+        apply_overrides(TrainConfig.preset_config("cpu"), ["p_max_overrides={'colision': (0.1, 1.0)}"]).validate()
+    with pytest.raises(ConfigError, match=r"p_max_overrides\['collision'\] must be \(initial, final\) within \[0, 1\]"):
+        apply_overrides(TrainConfig.preset_config("cpu"), ["p_max_overrides={'collision': (0.1, 2.0)}"]).validate()

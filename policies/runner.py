@@ -135,7 +135,11 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             self.current_learning_iteration = loaded["iter"]
         infos = loaded.get("infos") or {}
         if restore_env and "env_state" in infos:
-            self.env.load_state_dict(infos["env_state"])
+            mismatch = self.env.state_mismatch(infos["env_state"])
+            if mismatch is None:
+                self.env.load_state_dict(infos["env_state"])
+            else:  # saved by a run with another number of processes: its rank-0 shard only
+                print(f"{path}: fresh episodes, the saved environment state does not fit ({mismatch})")
         if "torch_rng" in infos:
             torch.set_rng_state(infos["torch_rng"])
         return infos

@@ -490,16 +490,24 @@ class PushEnv(VecEnv):
         """Everything needed to continue the simulation exactly (numpy copies)."""
         return {name: array.numpy().copy() for name, array in self._state_arrays().items()}
 
-    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
-        """Restores :meth:`state_dict`: re-applies every world's episode, then the saved state."""
+    def state_mismatch(self, state: dict[str, np.ndarray]) -> str | None:
+        """Why :meth:`load_state_dict` cannot restore ``state`` here (missing arrays, other shapes), or None."""
         arrays = self._state_arrays()
         missing = set(arrays) - set(state)
         if missing:
-            raise KeyError(f"environment state lacks {sorted(missing)}")
+            return f"environment state lacks {sorted(missing)}"
         for name, array in arrays.items():
             if tuple(state[name].shape) != tuple(array.numpy().shape):
-                raise ValueError(f"environment state {name!r} has shape {state[name].shape}, expected {array.numpy().shape}"
-                                 " (same num_envs required)")
+                return (f"environment state {name!r} has shape {state[name].shape}, expected {array.numpy().shape}"
+                        " (same num_envs required)")
+        return None
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        """Restores :meth:`state_dict`: re-applies every world's episode, then the saved state."""
+        mismatch = self.state_mismatch(state)
+        if mismatch is not None:
+            raise ValueError(mismatch)
+        arrays = self._state_arrays()
         with wp.ScopedDevice(self.wp_device):
             for name, array in arrays.items():
                 if name.startswith("spec."):

@@ -39,6 +39,9 @@ class FakePushEnv(VecEnv):
     def state_dict(self):
         return {"generator": self.generator.get_state(), "episode_length_buf": self.episode_length_buf.clone()}
 
+    def state_mismatch(self, state):
+        return None if len(state["episode_length_buf"]) == self.num_envs else "other num_envs"
+
     def load_state_dict(self, state):
         self.generator.set_state(state["generator"])
         self.episode_length_buf.copy_(state["episode_length_buf"])

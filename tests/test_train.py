@@ -154,3 +154,15 @@ def test_p_max_overrides_replace_the_papers_curriculum_of_a_group():
         apply_overrides(TrainConfig.preset_config("cpu"), ["p_max_overrides={'colision': (0.1, 1.0)}"]).validate()
     with pytest.raises(ConfigError, match=r"p_max_overrides\['collision'\] must be \(initial, final\) within \[0, 1\]"):
         apply_overrides(TrainConfig.preset_config("cpu"), ["p_max_overrides={'collision': (0.1, 2.0)}"]).validate()
+
+
+def test_resume_with_another_env_layout_starts_fresh_episodes(tmp_path, capsys):
+    """A run saved by 2 processes holds rank 0's shard only; resumed by 1 process it cannot restore it."""
+    run = tmp_path / "run"
+    train(tiny(2), run)
+    config = json.loads((run / "config.json").read_text())
+    config["env"]["num_envs"] = 4  # as the shard of a 2-process run of 8 worlds would have saved
+    (run / "config.json").write_text(json.dumps(config))
+    resumed = train(tiny(2), run, resume=True, extend_to=3)
+    assert resumed.current_learning_iteration == 2 and resumed.env.num_envs == 4
+    assert "fresh episodes, the saved environment state does not fit" in capsys.readouterr().out

@@ -246,12 +246,10 @@ class ConstraintObserver:
 
     def __init__(self, env: PushEnv):
         self.env = env
-        self.sizes = [size for _, size in env.constraint_groups]
-        self.violated = torch.zeros(env.num_envs, len(self.sizes), dtype=torch.long, device=env.device)
+        self.violated = torch.zeros(env.num_envs, len(env.constraint_groups), dtype=torch.long, device=env.device)
 
     def observe(self, step: int, in_episode: torch.Tensor, continuing: torch.Tensor) -> None:
-        groups = (self.env.constraints_t > 0).split(self.sizes, dim=1)
-        self.violated += torch.stack([g.any(dim=1) for g in groups], dim=1) & in_episode[:, None]
+        self.violated += self.env.violated_groups_t & in_episode[:, None]
 
 
 class ContactHeightObserver:

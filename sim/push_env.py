@@ -543,6 +543,11 @@ class PushEnv(VecEnv):
         weights[REWARD_TERMS.index(name)] = value
         self.task.reward_weights.assign(weights)
 
+    @property
+    def violated_groups_t(self) -> torch.Tensor:
+        """(num_envs, constraint groups) bool: a column of the group is violated (> 0) this step (Table II)."""
+        return torch.stack([g.any(dim=1) for g in torch.split(self.constraints_t > 0.0, self._group_sizes, dim=1)], dim=1)
+
     def _episode_log(self) -> dict[str, float | torch.Tensor]:
         """Metrics of the episodes that ended this step and the mean of each reward term.
 
@@ -551,8 +556,7 @@ class PushEnv(VecEnv):
         per constraint group the fraction of the episode's steps with a violated column (Table II).
         """
         log: dict[str, float | torch.Tensor] = {}
-        groups = torch.split(self.constraints_t > 0.0, self._group_sizes, dim=1)
-        self._violated_steps += torch.stack([g.any(dim=1) for g in groups], dim=1)
+        self._violated_steps += self.violated_groups_t
         self._steps_in_episode += 1.0
         ended = self.episode_success_t >= 0
         if bool(ended.any()):

@@ -140,6 +140,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
                 self.env.load_state_dict(infos["env_state"])
             else:  # saved by a run with another number of processes: its rank-0 shard only
                 print(f"{path}: fresh episodes, the saved environment state does not fit ({mismatch})")
+                self.env.set_goal_difficulty(float(infos["env_state"]["goal_difficulty"][0]))  # the curriculum goes on
         if "torch_rng" in infos:
             torch.set_rng_state(infos["torch_rng"])
         return infos

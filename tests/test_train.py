@@ -163,6 +163,11 @@ def test_resume_with_another_env_layout_starts_fresh_episodes(tmp_path, capsys):
     config = json.loads((run / "config.json").read_text())
     config["env"]["num_envs"] = 4  # as the shard of a 2-process run of 8 worlds would have saved
     (run / "config.json").write_text(json.dumps(config))
+    checkpoint = run / "model_1.pt"
+    saved = torch.load(checkpoint, weights_only=False)
+    saved["infos"]["env_state"]["goal_difficulty"][:] = 0.35  # a curriculum run's difficulty survives
+    torch.save(saved, checkpoint)
     resumed = train(tiny(2), run, resume=True, extend_to=3)
     assert resumed.current_learning_iteration == 2 and resumed.env.num_envs == 4
+    assert resumed.env.goal_difficulty_value == pytest.approx(0.35)
     assert "fresh episodes, the saved environment state does not fit" in capsys.readouterr().out

@@ -33,7 +33,7 @@ def wrap(angle: np.ndarray) -> np.ndarray:
 
 
 class ScriptedPusher:
-    """The controller of the module docstring for all worlds of a PushEnv; ``actions()`` once per step."""
+    """The controller of the module docstring for all worlds of a PushEnv, called once per step like a policy."""
 
     def __init__(self, env, push_speed: float = 0.35, clearance: float = 1.1):
         from dynpush.policies.evaluate import EnvProbe, yaw_of
@@ -53,7 +53,8 @@ class ScriptedPusher:
         box = np.minimum(box, 0.5 * np.hypot(dims[:, 0], dims[:, 1]))
         return np.where(shape == 1, 0.5 * dims[:, 0], box)
 
-    def actions(self) -> torch.Tensor:
+    def __call__(self, observations: np.ndarray) -> np.ndarray:
+        """Actions of every world from the true poses (``observations`` unused: a policy's call signature)."""
         base, obj = self.probe.base(), self.probe.object()
         p_base, yaw_base = base[:, :2], self.yaw_of(base[:, 3:])
         p_obj = obj[:, :2]
@@ -84,10 +85,31 @@ class ScriptedPusher:
         command = np.stack([vx, vy, yaw_rate, 0 * vx, 0 * vx, np.full_like(vx, self.base_default[5])], axis=1)
         actions = np.zeros((self.env.num_envs, self.env.num_actions), dtype=np.float32)
         actions[:, :6] = (command - self.base_default) / self.base_scale  # arm actions 0: the default pose
-        return torch.from_numpy(actions)
+        return actions
+
+
+class ContactObserver:
+    """Per step: the worlds whose object is within ``d_success`` of the goal, and the contact columns."""
+
+    def __init__(self, env, probe):
+        self.env, self.probe = env, probe
+        self.goal = env.task.goal_pos.numpy()[:, :2].copy()
+        self.reached = np.zeros(env.num_envs, dtype=bool)
+        self.contact_steps = np.zeros(env.task.contacts.shape[1])
+        self.collision_steps, self.steps = 0, 0
+
+    def observe(self, step: int, in_episode: torch.Tensor, continuing: torch.Tensor) -> None:
+        in_episode, continuing = in_episode.cpu().numpy(), continuing.cpu().numpy()
+        distance = np.linalg.norm(self.probe.object()[:, :2] - self.goal, axis=1)
+        self.reached |= continuing & (distance <= self.env.cfg.rewards.success_distance)
+        contacts = self.env.task.contacts.numpy() * in_episode[:, None]  # the last column is the EE-object contact
+        self.contact_steps += contacts.sum(0)
+        self.collision_steps += int((contacts[:, :-1].sum(1) > 0).sum())
+        self.steps += int(in_episode.sum())
 
 
 def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None) -> dict:
+    from dynpush.policies.evaluate import run_first_episodes
     from dynpush.policies.play import TrajectoryObserver, Trajectories, episode_row, episode_setup, plot_play
     from dynpush.sim.config import ObservationNoiseConfig, PushEnvConfig
     from dynpush.sim.push_env import PushEnv
@@ -95,47 +117,26 @@ def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None) 
     env = PushEnv(PushEnvConfig(num_envs=num_envs, seed=seed, noise=ObservationNoiseConfig(enabled=False)))
     env.set_goal_difficulty(goal_yaw_difficulty)
     env.reset(randomize_episode_step=False)
-    controller, observer = ScriptedPusher(env), TrajectoryObserver(env)
+    controller = ScriptedPusher(env)
+    contacts, paths = ContactObserver(env, controller.probe), TrajectoryObserver(env)
     setups = [episode_setup(env, w) for w in range(num_envs)]
-    goal = env.task.goal_pos.numpy()[:, :2]
-    in_episode = np.ones(num_envs, dtype=bool)
-    success, toppled, reached = (np.zeros(num_envs, dtype=bool) for _ in range(3))
-    length, first_success = np.zeros(num_envs, dtype=int), np.zeros(num_envs, dtype=int)
-    contact_steps, collision_steps, steps = np.zeros(env.task.contacts.shape[1]), 0, 0
-    d_success = env.cfg.rewards.success_distance
-    for step in range(env.max_episode_length):
-        env.step(controller.actions())
-        ended = in_episode & (env.reset_t.numpy() != 0)
-        continuing = in_episode & ~ended
-        success[ended] = env.episode_success_t.numpy()[ended] == 1
-        toppled[ended] = env.episode_toppled_t.numpy()[ended] == 1
-        first_success[in_episode & (env.success_t.numpy() != 0) & (first_success == 0)] = step + 1
-        distance = np.linalg.norm(controller.probe.object()[:, :2] - goal, axis=1)
-        reached |= continuing & (distance <= d_success)
-        contacts = env.task.contacts.numpy() * in_episode[:, None]  # the last column is the EE-object contact
-        contact_steps += contacts.sum(0)
-        collision_steps += int((contacts[:, :-1].sum(1) > 0).sum())
-        steps += int(in_episode.sum())
-        length += in_episode
-        observer.observe(step, torch.from_numpy(in_episode), torch.from_numpy(continuing))
-        in_episode = continuing
-        if not in_episode.any():
-            break
+    outcome = run_first_episodes(env, controller, [contacts, paths], started=True)
+    steps = contacts.steps
     result = {
         "episodes": num_envs, "goal_yaw_difficulty": goal_yaw_difficulty, "seed": seed,
-        "success_rate": float(success.mean()), "reached_within_d_success_rate": float(reached.mean()),
-        "toppled_rate": float(toppled.mean()),
-        "undesired_collision_percent_of_steps": float(100.0 * collision_steps / steps),
-        "collision_percent_of_steps_per_column": [round(float(100.0 * v / steps), 3) for v in contact_steps[:-1]],
-        "ee_contact_percent_of_steps": float(100.0 * contact_steps[-1] / steps),
+        "success_rate": float(outcome.success.mean()), "reached_within_d_success_rate": float(contacts.reached.mean()),
+        "toppled_rate": float(outcome.toppled.mean()),
+        "undesired_collision_percent_of_steps": float(100.0 * contacts.collision_steps / steps),
+        "collision_percent_of_steps_per_column": [round(float(100.0 * v / steps), 3) for v in contacts.contact_steps[:-1]],
+        "ee_contact_percent_of_steps": float(100.0 * contacts.contact_steps[-1] / steps),
     }
     if png is not None:
         shown = min(num_envs, 8)
-        rows = [episode_row(setups[w], env.cfg.control_dt, bool(success[w]), bool(toppled[w]), int(length[w]),
-                            int(first_success[w])) for w in range(shown)]
-        paths = observer.paths
+        rows = [episode_row(setups[w], env.cfg.control_dt, bool(outcome.success[w]), bool(outcome.toppled[w]),
+                            int(outcome.length[w]), int(outcome.first_success_step[w])) for w in range(shown)]
+        recorded = paths.paths
         plot_play({"policy": "scripted baseline", "episodes": rows},
-                  Trajectories(*([a[:shown] for a in getattr(paths, name)] for name in ("base", "ee", "object"))), png)
+                  Trajectories(*([a[:shown] for a in getattr(recorded, name)] for name in ("base", "ee", "object"))), png)
         result["png"] = str(png)
     return result
 

@@ -205,6 +205,10 @@ class SimRobot:
         elif not self.endpoint.wait_readable(self.cfg.command_timeout_s):
             raise TimeoutError(f"lock-step: no command from the runtime for {self.cfg.command_timeout_s} s")
 
+    def _start_episode_record(self) -> tuple[TrajectoryObserver | None, dict]:
+        """At an episode's start: its object and goal, and a path recorder when a picture is asked for."""
+        return (TrajectoryObserver(self.env) if self.cfg.trajectory_png else None), episode_setup(self.env, 0)
+
     def serve(self) -> None:
         """Steps until ``episodes`` episodes ended; one ``SIM2SIM`` line per episode, then ``done``."""
         env = self.env
@@ -225,30 +229,32 @@ class SimRobot:
                 if first_success == 0 and int(env.success_t[0]) != 0:
                     first_success = episode_steps
                 ended = int(env.reset_t[0]) != 0
-                observer.observe(episode_steps - 1, torch.tensor([True]), torch.tensor([not ended]))
+                if observer is not None:
+                    observer.observe(episode_steps - 1, torch.tensor([True]), torch.tensor([not ended]))
                 if ended:
                     results += 1
                     timed_out, toppled = bool(env.time_out_t[0]), bool(env.episode_toppled_t[0])
                     success = int(env.episode_success_t[0]) == 1
                     rows.append(episode_row(setup, self.dt, success, toppled, episode_steps, first_success))
-                    paths.append(observer.paths)
+                    if observer is not None:
+                        paths.append(observer.paths)
                     emit({"event": "episode", "index": results - 1, **rows[-1], "first_success_step": first_success,
                           "steps": episode_steps, "fallen": not (timed_out or toppled)})
                     episode_steps, first_success = 0, 0
                     if results < self.cfg.episodes:
                         self.send_goal()
-                        observer, setup = TrajectoryObserver(env), episode_setup(env, 0)
+                        observer, setup = self._start_episode_record()
             elif self.command is not None and self.command.state in OPERATING_STATES:
                 env.reset()
                 started = True
                 self.send_goal()
-                observer, setup = TrajectoryObserver(env), episode_setup(env, 0)
+                observer, setup = self._start_episode_record()
             self.publish()
-        if self.cfg.trajectory_png and rows:
+        if paths:
             plot_play({"policy": self.cfg.policy, "episodes": rows}, concatenate_episodes(paths), Path(self.cfg.trajectory_png))
         emit({"event": "done", "steps": self.step, "episodes": results, "runtime_stopped": results < self.cfg.episodes,
               "malformed_commands": self.malformed_commands,
-              "trajectory_png": self.cfg.trajectory_png if rows else None})
+              "trajectory_png": self.cfg.trajectory_png if paths else None})
 
     def close(self) -> None:
         self.endpoint.close()

@@ -55,6 +55,19 @@ def _train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _imitate(args: argparse.Namespace) -> int:
+    from dynpush.policies.imitation import ImitationConfig, imitate
+    from dynpush.policies.train import TrainConfig, apply_overrides
+
+    argv = args.argv[args.argv.index("imitate") + 1 :]
+    cfg = apply_overrides(TrainConfig.preset_config(args.preset), args.set or [])
+    imitation = ImitationConfig()
+    imitation.rounds = args.rounds or imitation.rounds
+    imitation.steps_per_round = args.steps_per_round or imitation.steps_per_round
+    imitate(cfg, imitation, Path(args.runs) / args.name, resume=args.resume, command=shlex.join(["dynpush", "imitate", *argv]))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="dynpush", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -75,6 +88,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--set", nargs="*", metavar="FIELD=VALUE", help="override config fields, e.g. env.num_envs=256 iterations=100")
     p.add_argument("--launched-as", default=None, help=argparse.SUPPRESS)  # the user's command, from a --procs relaunch
     p.set_defaults(func=_train)
+
+    p = sub.add_parser("imitate", help="DAgger from the scripted pusher into a run's actor (runs/NAME/model_0.pt);"
+                                      " fine-tune with dynpush train --name NAME --resume")
+    p.add_argument("--preset", default="cpu", help="cpu or paper: the run's environment and networks")
+    p.add_argument("--name", required=True, help="run name")
+    p.add_argument("--runs", default="runs", help="folder of the runs")
+    p.add_argument("--resume", action="store_true", help="continue after the last finished round")
+    p.add_argument("--rounds", type=int, default=None, help="DAgger rounds (default 8)")
+    p.add_argument("--steps-per-round", type=int, default=None, help="control steps of every world per round (default 250)")
+    p.add_argument("--set", nargs="*", metavar="FIELD=VALUE", help="override training config fields, as for train")
+    p.set_defaults(func=_imitate)
 
     # Commands of the evaluation/export side and of the deployment runtime register themselves.
     from dynpush.policies.commands import register as register_policy_commands

@@ -44,6 +44,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             raise TypeError(f"CaTOnPolicyRunner needs a CaTPPO algorithm, got {type(self.alg).__name__}.")
         self.schedule_cfg = ScheduleConfig.from_dict(train_cfg.get("schedule", {}))
         self.curriculum = GoalCurriculumConfig(**train_cfg.get("curriculum", {}))
+        self.critic_warmup_iterations = train_cfg.get("critic_warmup_iterations", 0)
         self.logger.__class__ = ProgressLogger  # rsl_rl's logger plus a progress bar and a one-line summary
         self.logger.run_state = {}
         self._snapshot: dict | None = None
@@ -65,6 +66,9 @@ class CaTOnPolicyRunner(OnPolicyRunner):
                 self.apply_curriculum(fresh_run=it == 0)
             self._snapshot = {"iteration": it, **copy.deepcopy(self._training_state(next_iteration=it))}
             self.apply_schedules(it, total_it)
+            # Critic warm-up: without gradients the actor (and its std) stays as it is, its KL is 0, and the
+            # adaptive learning rate is left unchanged.
+            self.alg.actor.requires_grad_(it >= self.critic_warmup_iterations)
 
         self.alg.on_rollout_start = on_rollout_start
         super().learn(num_learning_iterations, init_at_random_ep_len)

@@ -15,8 +15,9 @@ own 11 actions (6D base command and 5 arm joints about their defaults):
    at the largest offset, slowly, which turns the object more than it moves it.
 4. **Release**: at the goal (position and yaw within ``0.6`` of the success tolerances) back away.
 
-The controller keeps one bit per world (pushing or approaching, with hysteresis); the object's
-dimensions and shape are read from the task (a privileged input no policy observes).
+The controller has no memory: its action is a function of the current state, so that a memoryless
+policy can imitate it. The object's dimensions and shape are read from the task (a privileged input no
+policy observes).
 """
 
 from __future__ import annotations
@@ -24,8 +25,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from dynpush.kernels.views import EE_CONTACT
 
 
 def wrap(angle: np.ndarray) -> np.ndarray:
@@ -37,7 +36,7 @@ def wrap(angle: np.ndarray) -> np.ndarray:
 class ScriptedPusherConfig:
     """Gains and geometry of :class:`ScriptedPusher` (ours: tuned on the training distribution)."""
 
-    push_speed: float = 0.3  # m/s while in contact
+    push_speed: float = 0.5  # m/s while in contact, far from the goal (slower within 0.35 m)
     approach_speed: float = 0.8  # m/s
     clearance: float = 0.9  # m between the base path and the object's surface while going around it
     # Arm actions of the push pose (SH_ROT, SH_FLE, EL_FLE, FA_ROT, WRIST_1, in units of the action
@@ -48,10 +47,12 @@ class ScriptedPusherConfig:
     push_pitch: float = 0.15  # rad, base pitch command while pushing (nose down)
     ee_ahead: float = 0.86  # m
     yaw_gain: float = 0.5  # m of contact offset per rad of yaw error
-    max_offset: float = 0.7  # share of the face's half width the contact may be shifted
+    max_offset: float = 0.4  # share of the face's half width the contact may be shifted
     turn_radius: float = 0.08  # m: closer than this to the goal, only the yaw is corrected
     turn_speed: float = 0.15  # m/s
-    slip_margin: float = 0.1  # m the base may come closer to the object than the push stance
+    slip_margin: float = 0.3  # m the base may come closer to the object than the push stance
+    align_tolerance: float = 0.3  # rad between the base heading and the push direction while pushing
+    line_tolerance: float = 0.15  # m between the base and the push line while pushing
 
 
 class ScriptedPusher:
@@ -63,14 +64,9 @@ class ScriptedPusher:
         self.env, self.cfg, self.probe = env, cfg or ScriptedPusherConfig(), EnvProbe(env)
         self.base_default = np.asarray(env.cfg.actions.base_default)
         self.base_scale = np.asarray(env.cfg.actions.base_scale)
-        self.pushing = np.zeros(env.num_envs, dtype=bool)
         rewards = env.cfg.rewards
         self.done_distance = 0.6 * rewards.success_distance
         self.done_angle = 0.6 * np.radians(rewards.success_angle_deg)
-
-    def reset(self, worlds: np.ndarray) -> None:
-        """Forgets the push state of ``worlds`` (bool mask), whose episodes restarted."""
-        self.pushing[worlds] = False
 
     def _half_extent(self, direction: np.ndarray, object_yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Centre-to-surface distance of the object along ``direction`` (unit, world xy) and the half width
@@ -111,29 +107,27 @@ class ScriptedPusher:
         along = ((p_base - p_obj) * push_dir).sum(1)  # > -depth: not behind the object
         lateral = ((p_base - stand) * side_dir).sum(1)
         heading = np.arctan2(push_dir[:, 1], push_dir[:, 0])
-        at_start = (np.linalg.norm(p_base - behind, axis=1) < 0.15) & (np.abs(wrap(heading - yaw_base)) < 0.25)
-        # The push goes on while the base stays on the line behind the contact; a base closer to the object
-        # than the end-effector's reach, without end-effector contact, means it slipped off the face.
-        ee_contact = self.env.task.contacts.numpy()[:, EE_CONTACT] != 0
-        slipped = (along > -(depth + cfg.ee_ahead) + cfg.slip_margin) & ~ee_contact
-        self.pushing = np.where(self.pushing, (np.abs(lateral) < 0.25) & ~slipped, at_start)
+        # Push while the base is on the line behind the contact, facing along it, and not past the push stance
+        # (closer to the object than the end-effector's reach: the end-effector slipped off the face).
+        stance_along = -(depth + cfg.ee_ahead)
+        pushing = ((np.abs(wrap(heading - yaw_base)) < cfg.align_tolerance) & (np.abs(lateral) < cfg.line_tolerance)
+                   & (along < stance_along + cfg.slip_margin) & (along > stance_along - 0.45))
         side = np.sign(((p_base - p_obj) * side_dir).sum(1) + 1e-9)
         radius = np.maximum(depth, half_width) + cfg.clearance
         approach_along = depth + cfg.ee_ahead + 0.3  # how far behind the object's centre the approach ends
         around = p_obj + side_dir * (side * radius)[:, None] - push_dir * approach_along[:, None]
-        go_around = (along > -approach_along + 0.3) & ~self.pushing
-        speed = np.where(turning, cfg.turn_speed, cfg.push_speed)
-        target = np.where(self.pushing[:, None], stand + push_dir, np.where(go_around[:, None], around, behind))
+        go_around = (along > -approach_along + 0.3) & ~pushing
+        speed = np.where(turning, cfg.turn_speed, np.minimum(cfg.push_speed, cfg.turn_speed + distance))  # slow near the goal
+        target = np.where(pushing[:, None], stand + push_dir, np.where(go_around[:, None], around, behind))
         error = target - p_base
         c, s = np.cos(yaw_base), np.sin(yaw_base)
-        limit = np.where(self.pushing, speed, cfg.approach_speed)
+        limit = np.where(pushing, speed, cfg.approach_speed)
         vx = np.clip(2.0 * (c * error[:, 0] + s * error[:, 1]), -limit, limit)
         vy = np.clip(2.0 * (-s * error[:, 0] + c * error[:, 1]), -0.5, 0.5)
         yaw_rate = np.clip(2.5 * wrap(heading - yaw_base), -1.0, 1.0)
         done = (distance < self.done_distance) & (np.abs(yaw_error) < self.done_angle)
         vx, vy, yaw_rate = np.where(done, -0.3, vx), np.where(done, 0.0, vy), np.where(done, 0.0, yaw_rate)
-        self.pushing &= ~done
-        low = self.pushing | done
+        low = pushing | done
         pitch = np.where(low, cfg.push_pitch, self.base_default[4])
         height = np.where(low, cfg.push_height, self.base_default[5])
         command = np.stack([vx, vy, yaw_rate, 0 * vx, pitch, height], axis=1)

@@ -71,6 +71,9 @@ class TrainConfig:
     # group -> (initial, final), ramped like the others; e.g. {'collision': (0.1, 1.0)}.
     p_max_overrides: dict[str, tuple[float, float]] = field(default_factory=dict)
     curriculum: GoalCurriculumConfig = field(default_factory=GoalCurriculumConfig)
+    # Iterations at the start of the run in which only the critic learns and the actor is held (ours): for
+    # runs that start from a ``dynpush imitate`` checkpoint, whose critic has not learnt the returns yet.
+    critic_warmup_iterations: int = 0
 
     @staticmethod
     def preset_config(name: str) -> TrainConfig:
@@ -87,6 +90,8 @@ class TrainConfig:
     def validate(self) -> TrainConfig:
         self.env.validate()
         self.curriculum.validate()
+        if not isinstance(self.critic_warmup_iterations, int) or self.critic_warmup_iterations < 0:
+            raise ConfigError(f"critic_warmup_iterations must be an integer >= 0, got {self.critic_warmup_iterations!r}")
         for name in ("iterations", "num_steps_per_env", "save_interval"):
             if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be an integer >= 1, got {getattr(self, name)!r}")
@@ -127,6 +132,7 @@ class TrainConfig:
                                           **{name: (0.0, 0.0) for name in self.disabled_constraint_groups}}},
             },
             "curriculum": dataclasses.asdict(self.curriculum),
+            "critic_warmup_iterations": self.critic_warmup_iterations,
             "logger": "tensorboard",
             "check_for_nan": True,
         }

@@ -1,0 +1,108 @@
+"""dynpush imitate (DAgger from the scripted pusher) and the critic warm-up of the CaT-PPO fine-tuning that follows."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from dynpush.policies.imitation import ImitationConfig, imitate
+from dynpush.policies.train import TrainConfig, apply_overrides, train
+from dynpush.sim.config import ConfigError
+
+
+def tiny(iterations: int = 2, warmup: int = 0) -> TrainConfig:
+    cfg = TrainConfig.preset_config("cpu")
+    return apply_overrides(cfg, ["env.num_envs=8", f"iterations={iterations}", "num_steps_per_env=6", "save_interval=1",
+                                 "network.actor_hidden=(32, 32)", "network.critic_hidden=(32, 32)",
+                                 f"critic_warmup_iterations={warmup}"])
+
+
+def tiny_imitation(rounds: int) -> ImitationConfig:
+    return ImitationConfig(rounds=rounds, steps_per_round=40, epochs=20, batch_size=64, learning_rate=3e-3)
+
+
+def expert_loss(actor: torch.nn.Module, observations: torch.Tensor, labels: torch.Tensor) -> float:
+    with torch.no_grad():
+        return float(torch.nn.functional.mse_loss(actor.mlp(actor.obs_normalizer(observations)), labels))
+
+
+def test_dagger_fits_the_expert_and_its_checkpoint_exports_and_fine_tunes(tmp_path):
+    from dynpush.policies.export import OnnxPolicy, export_policy, load_actor
+
+    run = tmp_path / "bc"
+    checkpoint = imitate(tiny(), tiny_imitation(2), run)
+    rounds = [json.loads(line) for line in (run / "imitation.jsonl").read_text().splitlines()]
+    assert [r["round"] for r in rounds] == [0, 1] and rounds[0]["expert_worlds"] == 8
+    assert rounds[1]["samples"] == 2 * 8 * 40
+    saved = torch.load(checkpoint, weights_only=False)
+    assert saved["iter"] == 0
+
+    data = torch.load(run / "imitation_data.pt", weights_only=False)["dagger"]
+    fitted = load_actor(checkpoint, tiny())
+    untrained = load_actor(checkpoint, tiny())
+    for p in untrained.mlp.parameters():  # same normaliser, fresh weights
+        torch.nn.init.normal_(p, std=0.1)
+    fitted_loss = expert_loss(fitted, data["observations"], data["labels"])
+    assert fitted_loss < 0.5 * expert_loss(untrained, data["observations"], data["labels"])
+    assert fitted_loss == pytest.approx(rounds[1]["loss"], rel=0.5)
+
+    policy = OnnxPolicy(export_policy(run, "model_0.pt"))
+    observations = data["observations"][:1].numpy()
+    with torch.no_grad():
+        expected = fitted(observations_dict(observations)).numpy()
+    np.testing.assert_allclose(policy(observations), expected, atol=1e-4)
+
+    runner = train(tiny(), run, resume=True)  # CaT-PPO continues from the imitation checkpoint: iterations 0 and 1
+    assert runner.current_learning_iteration == 1
+    assert [json.loads(line)["iteration"] for line in (run / "progress.jsonl").read_text().splitlines()] == [0, 1]
+
+
+def observations_dict(observations: np.ndarray):
+    from tensordict import TensorDict
+
+    return TensorDict({"policy": torch.from_numpy(observations)}, batch_size=[observations.shape[0]])
+
+
+def test_interrupted_imitation_resumes_after_its_last_round(tmp_path):
+    run = tmp_path / "bc"
+    imitate(tiny(), tiny_imitation(1), run)
+    with pytest.raises(FileExistsError, match="holds a run already"):
+        imitate(tiny(), tiny_imitation(2), run)
+    imitate(tiny(), tiny_imitation(2), run, resume=True)
+    rounds = [json.loads(line) for line in (run / "imitation.jsonl").read_text().splitlines()]
+    assert [r["round"] for r in rounds] == [0, 1]
+    assert rounds[1]["samples"] == 2 * 8 * 40  # the aggregated data set survived the restart
+    launches = [json.loads(line) for line in (run / "launches.jsonl").read_text().splitlines()]
+    assert [launch["resume"] for launch in launches] == [False, True]
+
+
+def test_imitation_config_errors_name_the_field():
+    with pytest.raises(ConfigError, match="imitation.rounds must be an integer >= 1"):
+        ImitationConfig(rounds=0).validate()
+    with pytest.raises(ConfigError, match=r"imitation.expert_share must lie in \[0, 1\]"):
+        ImitationConfig(expert_share=1.5).validate()
+    with pytest.raises(ConfigError, match="critic_warmup_iterations must be an integer >= 0"):
+        tiny(warmup=-1).validate()
+
+
+def test_critic_warmup_holds_the_actor_and_trains_the_critic(tmp_path, monkeypatch):
+    from dynpush.policies.cat_ppo import CaTPPO
+
+    snapshots = []
+    original = CaTPPO.update
+
+    def update(self):
+        result = original(self)
+        snapshots.append(([p.detach().clone() for p in self.actor.parameters()],
+                          [p.detach().clone() for p in self.critic.parameters()]))
+        return result
+
+    monkeypatch.setattr(CaTPPO, "update", update)
+    runner = train(tiny(iterations=3, warmup=2), tmp_path / "run")
+    assert len(snapshots) == 3
+    first, second, third = snapshots
+    assert all(torch.equal(a, b) for a, b in zip(first[0], second[0]))  # the actor is held in iterations 0 and 1
+    assert not all(torch.equal(a, b) for a, b in zip(first[1], second[1]))  # while the critic learns
+    assert not all(torch.equal(a, b) for a, b in zip(second[0], third[0]))  # iteration 2 trains the actor
+    assert all(p.requires_grad for p in runner.alg.actor.parameters())

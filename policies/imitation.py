@@ -14,7 +14,8 @@ pusher (:mod:`dynpush.policies.scripted`, which reads the true state) pushes fro
 
 The result is the run's ``model_0.pt`` (a normal training checkpoint at iteration 0), so
 ``dynpush export``/``eval`` read it as any checkpoint and ``dynpush train --resume`` fine-tunes it with
-CaT-PPO. Each round appends its figures to ``imitation.jsonl``; an interrupted job keeps the rounds it
+CaT-PPO. Each round appends its figures (episodes that ended, their success and toppled rates, the
+loss, world-steps and seconds) to ``imitation.jsonl``; an interrupted job keeps the rounds it
 finished and ``--resume`` continues after them (the aggregated data set is saved with each round).
 """
 
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import json
 import signal
+import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -169,8 +171,11 @@ def imitate(cfg: TrainConfig, imitation: ImitationConfig, run_dir: Path, resume:
     try:
         with tqdm(total=total, unit="world-steps", desc="DAgger", smoothing=0.1) as progress:
             for round_index in range(first_round, imitation.rounds):
+                start = time.perf_counter()
                 figures = dagger.collect(round_index, progress)
-                figures |= {"round": round_index, "samples": int(dagger.labels.shape[0]), "loss": dagger.fit()}
+                figures |= {"round": round_index, "samples": int(dagger.labels.shape[0]), "loss": dagger.fit(),
+                            "world_steps": imitation.steps_per_round * env.num_envs,
+                            "seconds": time.perf_counter() - start}
                 tqdm.write(json.dumps(figures))
                 with open(log_path, "a") as f:
                     f.write(json.dumps(figures) + "\n")

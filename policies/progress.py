@@ -91,6 +91,13 @@ def read_progress(run_dir: Path) -> list[dict]:
     return [records[it] for it in sorted(records)]
 
 
+def read_imitation(run_dir: Path) -> list[dict]:
+    """The DAgger rounds of a run started by ``dynpush imitate`` (``imitation.jsonl``), oldest first; [] for a
+    run trained from scratch."""
+    path = Path(run_dir) / "imitation.jsonl"
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()] if path.exists() else []
+
+
 def wall_clock_hours(records: list[dict]) -> np.ndarray:
     """Training wall-clock [h] at the end of each record's iteration.
 
@@ -116,7 +123,8 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     records = read_progress(run_dir)
     if not records:
         raise ValueError(f"{run_dir}/progress.jsonl has no iterations yet")
-    hours = wall_clock_hours(records)
+    imitation_hours = sum(r["seconds"] for r in read_imitation(run_dir)) / 3600.0  # CaT-PPO starts after DAgger
+    hours = imitation_hours + wall_clock_hours(records)
 
     def series(key: str) -> np.ndarray:
         return np.array([r.get(key, np.nan) for r in records], dtype=float)
@@ -151,6 +159,10 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     ax_delta.legend(fontsize=8, loc="upper left")
     for ax in (ax_rate, ax_reward, ax_delta):
         ax.grid(alpha=0.3)
+        if imitation_hours > 0.0:
+            ax.axvspan(0.0, imitation_hours, color="gold", alpha=0.25, lw=0)
+    if imitation_hours > 0.0:
+        ax_rate.text(0.5 * imitation_hours, 50.0, "DAgger from the\nscripted pusher", ha="center", va="center", fontsize=8)
     fig.suptitle(f"{Path(run_dir).name}: {len(records)} iterations in {hours[-1]:.2f} h"
                  f" (smoothed over {SMOOTHING} iterations)")
     out.parent.mkdir(parents=True, exist_ok=True)

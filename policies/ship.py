@@ -4,7 +4,8 @@ One step, so the shipped files always belong together (``dynpush.shipped``): the
 exported to ``policy.onnx``, evaluated with ``dynpush eval`` on the training distribution (4096
 episodes by default, paper IV-A), the learning curve is drawn from ``progress.jsonl``, and
 ``training.json`` records the training command(s) from ``launches.jsonl``, the seed, the commit, the
-checkpoint, the training wall-clock and world-steps, and the evaluation summary.
+checkpoint, the training wall-clock and world-steps (the DAgger rounds of a run started by ``dynpush
+imitate`` included, and also listed on their own), and the evaluation summary.
 """
 
 from __future__ import annotations
@@ -17,11 +18,11 @@ import torch
 
 from .evaluate import EvalConfig, evaluate
 from .export import OnnxPolicy, export_policy, load_run_config, resolve_checkpoint
-from .progress import plot_learning_curve, read_progress, wall_clock_hours
+from .progress import plot_learning_curve, read_imitation, read_progress, wall_clock_hours
 
 
 def read_launches(run_dir: Path) -> list[dict]:
-    """The ``dynpush train`` launches of a run (``launches.jsonl``), oldest first."""
+    """The ``dynpush imitate`` / ``dynpush train`` launches of a run (``launches.jsonl``), oldest first."""
     path = run_dir / "launches.jsonl"
     if not path.exists():
         raise FileNotFoundError(f"{path} not found: the run's training command is unknown (dynpush train writes it)")
@@ -40,6 +41,9 @@ def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: 
     plot_learning_curve(run_dir, out_dir / "learning_curve.png", result["paper"]["success_rate"])
     iteration = int(torch.load(checkpoint_path, weights_only=False, map_location="cpu")["iter"])  # completed iterations
     trained = [r for r in read_progress(run_dir) if r["iteration"] < iteration]
+    rounds = read_imitation(run_dir)
+    imitation = {"rounds": len(rounds), "world_steps": sum(r["world_steps"] for r in rounds),
+                 "wall_clock_h": sum(r["seconds"] for r in rounds) / 3600.0} if rounds else None
     shutil.copyfile(run_dir / "config.json", out_dir / "training_config.json")
     record = {
         "run": run_dir.name,
@@ -48,8 +52,11 @@ def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: 
         "seed": cfg.env.seed,
         "checkpoint": checkpoint_path.name,
         "iterations": iteration,
-        "world_steps": iteration * cfg.num_steps_per_env * cfg.env.num_envs,
-        "training_wall_clock_h": float(wall_clock_hours(trained)[-1]) if trained else 0.0,
+        # CaT-PPO iterations, plus the DAgger rounds of a run started by dynpush imitate
+        "world_steps": iteration * cfg.num_steps_per_env * cfg.env.num_envs + (imitation["world_steps"] if imitation else 0),
+        "training_wall_clock_h": (float(wall_clock_hours(trained)[-1]) if trained else 0.0)
+                                 + (imitation["wall_clock_h"] if imitation else 0.0),
+        "imitation": imitation,
         "training_config_sha256": OnnxPolicy(policy_path).contract.training_config_sha256,
         "evaluation": {"episodes": result["episodes"], "success_percent": result["success_rate"],
                        "toppled_percent": result["toppled_rate"],

@@ -18,7 +18,7 @@ def test_shipped_files_belong_together():
     assert evaluation["config"]["training_config_sha256"] == record["training_config_sha256"]
     assert evaluation["success_rate"] == record["evaluation"]["success_percent"]
     assert evaluation["episodes"] == record["evaluation"]["episodes"]
-    assert record["commands"] and all(c.startswith("dynpush train") for c in record["commands"])
+    assert record["commands"] and all(c.startswith(("dynpush train", "dynpush imitate")) for c in record["commands"])
     assert record["launches"][0]["commit"] and record["checkpoint"].startswith("model_")
     for name in ("eval.png", "learning_curve.png"):
         assert shipped_file(name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -89,7 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--launched-as", default=None, help=argparse.SUPPRESS)  # the user's command, from a --procs relaunch
     p.set_defaults(func=_train)
 
-    p = sub.add_parser("imitate", help="DAgger from the scripted pusher into a run's actor (runs/NAME/model_0.pt);"
+    p = sub.add_parser("imitate", help="DAgger from the scripted pusher into a run's actor (runs/NAME/imitation.pt);"
                                       " fine-tune with dynpush train --name NAME --resume")
     p.add_argument("--preset", default="cpu", help="cpu or paper: the run's environment and networks")
     p.add_argument("--name", required=True, help="run name")

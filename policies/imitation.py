@@ -7,14 +7,17 @@ pusher (:mod:`dynpush.policies.scripted`, which reads the true state) pushes fro
 
 - round ``r`` rolls out ``steps_per_round`` control steps of every world of the training environment
   (training distribution, observation noise on); a world is driven by the expert with probability
-  ``expert_share ** r`` (drawn per world and round), otherwise by the actor's deterministic mean; every
-  visited state is labelled with the expert's action;
+  ``expert_share ** r`` (drawn per world and round), otherwise by the actor's deterministic mean, and the
+  executed actions get the Gaussian noise of the run's initial action std (``network.init_noise_std``;
+  DART, Laskey et al., 2017): the data then covers the states the noisy CaT-PPO rollouts visit, and the
+  observation normaliser the spread of, e.g., arm joints that the expert alone holds still; every visited
+  state is labelled with the expert's (noise-free) action;
 - the actor (the run's own MLP with its observation normaliser) is fitted to all labelled states so far
   (the newest ``max_samples``) by mean squared error of its mean action, ``epochs`` passes per round.
 
-The result is the run's ``model_0.pt`` (a normal training checkpoint at iteration 0), so
-``dynpush export``/``eval`` read it as any checkpoint and ``dynpush train --resume`` fine-tunes it with
-CaT-PPO. Each round appends its figures (episodes that ended, their success and toppled rates, the
+The result is the run's ``imitation.pt``, a training checkpoint at iteration 0 (the run's latest
+checkpoint until CaT-PPO saves ``model_K.pt``), so ``dynpush export`` reads it as any checkpoint and
+``dynpush train --resume`` fine-tunes it with CaT-PPO. Each round appends its figures (episodes that ended, their success and toppled rates, the
 loss, world-steps and seconds) to ``imitation.jsonl``; an interrupted job keeps the rounds it
 finished and ``--resume`` continues after them (the aggregated data set is saved with each round).
 """
@@ -34,7 +37,7 @@ from tqdm import tqdm
 from dynpush.sim.config import ConfigError
 
 from .scripted import ScriptedPusher
-from .train import TrainConfig, record_launch
+from .train import IMITATION_CHECKPOINT, TrainConfig, record_launch
 
 
 @dataclass
@@ -64,8 +67,8 @@ class ImitationConfig:
 class Dagger:
     """The DAgger loop of the module docstring on one environment and one runner's actor."""
 
-    def __init__(self, env, actor: torch.nn.Module, cfg: ImitationConfig, seed: int = 0):
-        self.env, self.actor, self.cfg = env, actor, cfg
+    def __init__(self, env, actor: torch.nn.Module, cfg: ImitationConfig, action_noise_std: float, seed: int = 0):
+        self.env, self.actor, self.cfg, self.action_noise_std = env, actor, cfg, action_noise_std
         self.expert = ScriptedPusher(env)
         self.optimizer = torch.optim.Adam(actor.mlp.parameters(), lr=cfg.learning_rate)
         self.generator = torch.Generator().manual_seed(seed)
@@ -87,6 +90,7 @@ class Dagger:
             new_obs.append(observations["policy"].clone())
             new_labels.append(expert_actions)
             actions = torch.where(expert_drives[:, None], expert_actions, student_actions)
+            actions += self.action_noise_std * torch.randn(actions.shape, generator=self.generator)
             observations = env.step(actions)[0]
             done = env.reset_t != 0
             ended += int(done.sum())
@@ -130,14 +134,14 @@ class Dagger:
 
 def imitate(cfg: TrainConfig, imitation: ImitationConfig, run_dir: Path, resume: bool = False,
             command: str | None = None) -> Path:
-    """Runs DAgger into ``run_dir`` (see the module docstring); returns the path of ``model_0.pt``."""
+    """Runs DAgger into ``run_dir`` (see the module docstring); returns the path of ``imitation.pt``."""
     from dynpush.sim.push_env import PushEnv
 
     from .runner import CaTOnPolicyRunner
 
     imitation.validate()
     config_path, log_path, data_path = run_dir / "config.json", run_dir / "imitation.jsonl", run_dir / "imitation_data.pt"
-    checkpoint = run_dir / "model_0.pt"
+    checkpoint = run_dir / IMITATION_CHECKPOINT
     if resume:
         if not data_path.exists():
             raise FileNotFoundError(f"--resume: no {data_path}; start without --resume first")
@@ -155,7 +159,7 @@ def imitate(cfg: TrainConfig, imitation: ImitationConfig, run_dir: Path, resume:
 
     env = PushEnv(cfg.env)
     runner = CaTOnPolicyRunner(env, cfg.runner_cfg(), log_dir=None, device=env.device)
-    dagger = Dagger(env, runner.alg.actor, imitation, seed=cfg.env.seed)
+    dagger = Dagger(env, runner.alg.actor, imitation, cfg.network.init_noise_std, seed=cfg.env.seed)
     first_round = 0
     if resume:
         runner.load(str(checkpoint), restore_env=False)

@@ -183,9 +183,15 @@ def apply_overrides(cfg: TrainConfig, overrides: list[str]) -> TrainConfig:
     return cfg
 
 
+IMITATION_CHECKPOINT = "imitation.pt"  # written by dynpush imitate; CaT-PPO starts from it
+
+
 def latest_checkpoint(run_dir: Path) -> Path | None:
+    """The run's ``model_K.pt`` with the largest K; before the first one, its imitation checkpoint (if any)."""
     checkpoints = sorted(run_dir.glob("model_*.pt"), key=lambda p: int(p.stem.split("_")[1]))
-    return checkpoints[-1] if checkpoints else None
+    if checkpoints:
+        return checkpoints[-1]
+    return run_dir / IMITATION_CHECKPOINT if (run_dir / IMITATION_CHECKPOINT).exists() else None
 
 
 @dataclass

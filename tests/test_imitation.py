@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from dynpush.policies.imitation import ImitationConfig, imitate
-from dynpush.policies.train import TrainConfig, apply_overrides, train
+from dynpush.policies.train import TrainConfig, apply_overrides, latest_checkpoint, train
 from dynpush.sim.config import ConfigError
 
 
@@ -47,7 +47,7 @@ def test_dagger_fits_the_expert_and_its_checkpoint_exports_and_fine_tunes(tmp_pa
     assert fitted_loss < 0.5 * expert_loss(untrained, data["observations"], data["labels"])
     assert fitted_loss == pytest.approx(rounds[1]["loss"], rel=0.5)
 
-    policy = OnnxPolicy(export_policy(run, "model_0.pt"))
+    policy = OnnxPolicy(export_policy(run, "imitation.pt"))
     observations = data["observations"][:1].numpy()
     with torch.no_grad():
         expected = fitted(observations_dict(observations)).numpy()
@@ -106,3 +106,4 @@ def test_critic_warmup_holds_the_actor_and_trains_the_critic(tmp_path, monkeypat
     assert not all(torch.equal(a, b) for a, b in zip(first[1], second[1]))  # while the critic learns
     assert not all(torch.equal(a, b) for a, b in zip(second[0], third[0]))  # iteration 2 trains the actor
     assert all(p.requires_grad for p in runner.alg.actor.parameters())
+

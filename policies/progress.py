@@ -112,11 +112,13 @@ def wall_clock_hours(records: list[dict]) -> np.ndarray:
     return np.cumsum(seconds) / 3600.0
 
 
-def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float | None = None) -> dict:
+def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float | None = None,
+                        marked_iteration: int | None = None) -> dict:
     """Success, topple and reward curves of a run against training wall-clock hours; writes the PNG ``out``.
 
     Episode rates are of the episodes that ended in each iteration (smoothed over ``SMOOTHING`` iterations).
-    Returns the final smoothed figures.
+    ``marked_iteration``: a vertical line where a checkpoint of that many iterations was saved (the shipped
+    one). Returns the final smoothed figures.
     """
     from matplotlib.figure import Figure
 
@@ -161,6 +163,12 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
         ax.grid(alpha=0.3)
         if imitation_hours > 0.0:
             ax.axvspan(0.0, imitation_hours, color="gold", alpha=0.25, lw=0)
+    if marked_iteration is not None:
+        done = [h for r, h in zip(records, hours) if r["iteration"] < marked_iteration]
+        marked_hours = done[-1] if done else imitation_hours
+        for ax in (ax_rate, ax_reward, ax_delta):
+            ax.axvline(marked_hours, color="k", ls=":", lw=1.0)
+        ax_rate.text(marked_hours, 95.0, f" checkpoint after {marked_iteration} iterations", fontsize=8, va="top")
     if imitation_hours > 0.0:
         ax_rate.text(0.5 * imitation_hours, 50.0, "DAgger from the\nscripted pusher", ha="center", va="center", fontsize=8)
     fig.suptitle(f"{Path(run_dir).name}: {len(records)} iterations in {hours[-1]:.2f} h"

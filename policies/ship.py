@@ -38,8 +38,8 @@ def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: 
     out_dir.mkdir(parents=True, exist_ok=True)
     policy_path = export_policy(run_dir, checkpoint_path.name, out_dir / "policy.onnx")
     result = evaluate(policy_path, EvalConfig(episodes=episodes, seed=seed), out_dir)
-    plot_learning_curve(run_dir, out_dir / "learning_curve.png", result["paper"]["success_rate"])
     iteration = int(torch.load(checkpoint_path, weights_only=False, map_location="cpu")["iter"])  # completed iterations
+    plot_learning_curve(run_dir, out_dir / "learning_curve.png", result["paper"]["success_rate"], iteration)
     trained = [r for r in read_progress(run_dir) if r["iteration"] < iteration]
     rounds = read_imitation(run_dir)
     imitation = {"rounds": len(rounds), "world_steps": sum(r["world_steps"] for r in rounds),

@@ -61,9 +61,8 @@ def _imitate(args: argparse.Namespace) -> int:
 
     argv = args.argv[args.argv.index("imitate") + 1 :]
     cfg = apply_overrides(TrainConfig.preset_config(args.preset), args.set or [])
-    imitation = ImitationConfig()
-    imitation.rounds = args.rounds or imitation.rounds
-    imitation.steps_per_round = args.steps_per_round or imitation.steps_per_round
+    given = {"rounds": args.rounds, "steps_per_round": args.steps_per_round}
+    imitation = ImitationConfig(**{name: value for name, value in given.items() if value is not None})
     imitate(cfg, imitation, Path(args.runs) / args.name, resume=args.resume, command=shlex.join(["dynpush", "imitate", *argv]))
     return 0
 

@@ -17,27 +17,26 @@ pusher (:mod:`dynpush.policies.scripted`, which reads the true state) pushes fro
 
 The result is the run's ``imitation.pt``, a training checkpoint at iteration 0 (the run's latest
 checkpoint until CaT-PPO saves ``model_K.pt``), so ``dynpush export`` reads it as any checkpoint and
-``dynpush train --resume`` fine-tunes it with CaT-PPO. Each round appends its figures (episodes that ended, their success and toppled rates, the
-loss, world-steps and seconds) to ``imitation.jsonl``; an interrupted job keeps the rounds it
-finished and ``--resume`` continues after them (the aggregated data set is saved with each round).
+``dynpush train --resume`` fine-tunes it with CaT-PPO. Each round appends its figures (episodes that
+ended, their success and toppled rates, the loss, world-steps and seconds) to ``imitation.jsonl``; an
+interrupted job (Ctrl-C or SIGTERM) keeps the rounds it finished and ``--resume`` continues after them
+(the aggregated data set is saved with each round).
 """
 
 from __future__ import annotations
 
 import json
-import signal
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import numpy as np
 import torch
 from tqdm import tqdm
 
 from dynpush.sim.config import ConfigError
 
 from .scripted import ScriptedPusher
-from .train import IMITATION_CHECKPOINT, TrainConfig, record_launch
+from .train import IMITATION_CHECKPOINT, TrainConfig, record_launch, sigterm_as_keyboard_interrupt
 
 
 @dataclass
@@ -100,14 +99,12 @@ class Dagger:
                 progress.update(n)
         self.observations = torch.cat([self.observations, *new_obs])[-self.cfg.max_samples:]
         self.labels = torch.cat([self.labels, *new_labels])[-self.cfg.max_samples:]
-        student = ~expert_drives
         return {"episodes_ended": ended, "success_rate": succeeded / max(ended, 1), "toppled_rate": toppled / max(ended, 1),
-                "expert_worlds": int(expert_drives.sum()), "student_worlds": int(student.sum())}
+                "expert_worlds": int(expert_drives.sum()), "student_worlds": int((~expert_drives).sum())}
 
     def fit(self) -> float:
         """``epochs`` passes of mean-squared-error regression of the actor's mean on the labels; the last pass's loss."""
         count = self.observations.shape[0]
-        loss_sum = 0.0
         for _ in range(self.cfg.epochs):
             order = torch.randperm(count, generator=self.generator)
             loss_sum, batches = 0.0, 0
@@ -167,13 +164,9 @@ def imitate(cfg: TrainConfig, imitation: ImitationConfig, run_dir: Path, resume:
         dagger.load_state_dict(saved["dagger"])
         first_round = saved["rounds_done"]
 
-    def on_sigterm(signum, frame):
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, on_sigterm)
     total = (imitation.rounds - first_round) * imitation.steps_per_round * env.num_envs
     try:
-        with tqdm(total=total, unit="world-steps", desc="DAgger", smoothing=0.1) as progress:
+        with sigterm_as_keyboard_interrupt(), tqdm(total=total, unit="world-steps", desc="DAgger", smoothing=0.1) as progress:
             for round_index in range(first_round, imitation.rounds):
                 start = time.perf_counter()
                 figures = dagger.collect(round_index, progress)
@@ -187,6 +180,4 @@ def imitate(cfg: TrainConfig, imitation: ImitationConfig, run_dir: Path, resume:
                 torch.save({"dagger": dagger.state_dict(), "rounds_done": round_index + 1}, data_path)
     except KeyboardInterrupt:
         print(f"\ninterrupted: {checkpoint} holds the last finished round; continue with --resume")
-    finally:
-        signal.signal(signal.SIGTERM, previous)
     return checkpoint

@@ -91,11 +91,15 @@ def read_progress(run_dir: Path) -> list[dict]:
     return [records[it] for it in sorted(records)]
 
 
-def read_imitation(run_dir: Path) -> list[dict]:
-    """The DAgger rounds of a run started by ``dynpush imitate`` (``imitation.jsonl``), oldest first; [] for a
-    run trained from scratch."""
+def imitation_summary(run_dir: Path) -> dict | None:
+    """Rounds, world-steps and wall-clock [h] of the DAgger phase of a run started by ``dynpush imitate``
+    (``imitation.jsonl``); None for a run trained from scratch."""
     path = Path(run_dir) / "imitation.jsonl"
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()] if path.exists() else []
+    if not path.exists():
+        return None
+    rounds = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    return {"rounds": len(rounds), "world_steps": sum(r["world_steps"] for r in rounds),
+            "wall_clock_h": sum(r["seconds"] for r in rounds) / 3600.0}
 
 
 def wall_clock_hours(records: list[dict]) -> np.ndarray:
@@ -125,7 +129,8 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     records = read_progress(run_dir)
     if not records:
         raise ValueError(f"{run_dir}/progress.jsonl has no iterations yet")
-    imitation_hours = sum(r["seconds"] for r in read_imitation(run_dir)) / 3600.0  # CaT-PPO starts after DAgger
+    imitation = imitation_summary(run_dir)
+    imitation_hours = imitation["wall_clock_h"] if imitation else 0.0  # CaT-PPO starts after DAgger
     hours = imitation_hours + wall_clock_hours(records)
 
     def series(key: str) -> np.ndarray:

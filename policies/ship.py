@@ -18,7 +18,7 @@ import torch
 
 from .evaluate import EvalConfig, evaluate
 from .export import OnnxPolicy, export_policy, load_run_config, resolve_checkpoint
-from .progress import plot_learning_curve, read_imitation, read_progress, wall_clock_hours
+from .progress import imitation_summary, plot_learning_curve, read_progress, wall_clock_hours
 
 
 def read_launches(run_dir: Path) -> list[dict]:
@@ -41,9 +41,7 @@ def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: 
     iteration = int(torch.load(checkpoint_path, weights_only=False, map_location="cpu")["iter"])  # completed iterations
     plot_learning_curve(run_dir, out_dir / "learning_curve.png", result["paper"]["success_rate"], iteration)
     trained = [r for r in read_progress(run_dir) if r["iteration"] < iteration]
-    rounds = read_imitation(run_dir)
-    imitation = {"rounds": len(rounds), "world_steps": sum(r["world_steps"] for r in rounds),
-                 "wall_clock_h": sum(r["seconds"] for r in rounds) / 3600.0} if rounds else None
+    imitation = imitation_summary(run_dir)
     shutil.copyfile(run_dir / "config.json", out_dir / "training_config.json")
     record = {
         "run": run_dir.name,

@@ -8,6 +8,7 @@ iterations, III-A) on a GPU; the ``cpu`` preset is sized for a 2-core laptop-cla
 from __future__ import annotations
 
 import ast
+import contextlib
 import dataclasses
 import json
 import os
@@ -254,19 +255,29 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, command: str | 
         print(f"{run_dir}: all {cfg.iterations} iterations done")
         return runner
 
+    try:
+        with sigterm_as_keyboard_interrupt():
+            runner.learn(remaining, total_iterations=cfg.iterations)
+    except KeyboardInterrupt:
+        if group.rank == 0:
+            path = runner.save_interrupted()
+            print(f"\ninterrupted: saved {path}; continue with --resume")
+    return runner
+
+
+@contextlib.contextmanager
+def sigterm_as_keyboard_interrupt():
+    """Within the block SIGTERM raises KeyboardInterrupt, so a long job stopped by ``kill`` (or by a shell that
+    ignores SIGINT in background jobs) saves its progress as after Ctrl-C."""
+
     def on_sigterm(signum, frame):
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGTERM, on_sigterm)
     try:
-        runner.learn(remaining, total_iterations=cfg.iterations)
-    except KeyboardInterrupt:
-        if group.rank == 0:
-            path = runner.save_interrupted()
-            print(f"\ninterrupted: saved {path}; continue with --resume")
+        yield
     finally:
         signal.signal(signal.SIGTERM, previous)
-    return runner
 
 
 def source_commit() -> str | None:

@@ -43,6 +43,9 @@ class ScriptedPusherConfig:
     # scale): shoulder forward, wrist down. With the base at push_height the end-effector is ~0.1 m
     # above the floor and ee_ahead in front of the base origin (measured in the environment).
     push_arm_action: tuple[float, ...] = (0.0, 0.2, -0.8, 0.0, 0.6)
+    # Arm actions while walking: the end-effector pulled in to ~0.46 m ahead of the base origin, 0.5 m high,
+    # so that turning near the object does not sweep the arm through it.
+    carry_arm_action: tuple[float, ...] = (0.0, -1.0, 2.0, 0.0, 0.0)
     push_height: float = 0.42  # m, base height command while pushing
     push_pitch: float = 0.15  # rad, base pitch command while pushing (nose down)
     ee_ahead: float = 0.86  # m
@@ -50,9 +53,15 @@ class ScriptedPusherConfig:
     max_offset: float = 0.4  # share of the face's half width the contact may be shifted
     turn_radius: float = 0.08  # m: closer than this to the goal, only the yaw is corrected
     turn_speed: float = 0.15  # m/s
-    slip_margin: float = 0.3  # m the base may come closer to the object than the push stance
-    align_tolerance: float = 0.3  # rad between the base heading and the push direction while pushing
-    line_tolerance: float = 0.15  # m between the base and the push line while pushing
+    align_tolerance: float = 0.4  # rad between the base heading and the push direction while pushing
+    line_tolerance: float = 0.25  # m between the end-effector and the contact point across the push
+    face_share: float = 0.9  # share of the face's half width the end-effector may be off its centre while pushing
+    engage_distance: float = 0.45  # m: the push starts with the end-effector this close behind the contact
+    slip_margin: float = 0.3  # m the end-effector may be pressed past the contact point (arm deflection)
+    lateral_gain: float = 4.0  # 1/s: base velocity across the push per m of end-effector offset
+    lateral_yaw_gain: float = 2.0  # rad/s of base yaw rate per m of end-effector offset across the push
+    around_step: float = 0.6  # rad of arc the walk around the object aims ahead of the base
+    behind_margin: float = 0.5  # m the base origin must be behind the object's rear face to walk straight to the push stance
 
 
 class ScriptedPusher:
@@ -89,6 +98,7 @@ class ScriptedPusher:
         base, obj = self.probe.base(), self.probe.object()
         p_base, yaw_base = base[:, :2], yaw_of(base[:, 3:])
         p_obj, yaw_obj = obj[:, :2], yaw_of(obj[:, 3:])
+        p_ee = self.probe.ee_position()[:, :2]
         to_goal = self.env.task.goal_pos.numpy()[:, :2] - p_obj
         yaw_error = wrap(yaw_of(self.env.task.goal_quat.numpy()) - yaw_obj)
         distance = np.linalg.norm(to_goal, axis=1)
@@ -102,36 +112,50 @@ class ScriptedPusher:
         offset = np.clip(-cfg.yaw_gain * yaw_error, -max_offset, max_offset)
         offset = np.where(turning, -np.sign(yaw_error) * max_offset, offset)
         contact = p_obj - push_dir * depth[:, None] + side_dir * offset[:, None]
-        stand = contact - push_dir * cfg.ee_ahead  # base origin with the end-effector on the contact point
-        behind = stand - 0.3 * push_dir
-        along = ((p_base - p_obj) * push_dir).sum(1)  # > -depth: not behind the object
-        lateral = ((p_base - stand) * side_dir).sum(1)
         heading = np.arctan2(push_dir[:, 1], push_dir[:, 0])
-        # Push while the base is on the line behind the contact, facing along it, and not past the push stance
-        # (closer to the object than the end-effector's reach: the end-effector slipped off the face).
-        stance_along = -(depth + cfg.ee_ahead)
-        pushing = ((np.abs(wrap(heading - yaw_base)) < cfg.align_tolerance) & (np.abs(lateral) < cfg.line_tolerance)
-                   & (along < stance_along + cfg.slip_margin) & (along > stance_along - 0.45))
-        side = np.sign(((p_base - p_obj) * side_dir).sum(1) + 1e-9)
-        radius = np.maximum(depth, half_width) + cfg.clearance
-        approach_along = depth + cfg.ee_ahead + 0.3  # how far behind the object's centre the approach ends
-        around = p_obj + side_dir * (side * radius)[:, None] - push_dir * approach_along[:, None]
-        go_around = (along > -approach_along + 0.3) & ~pushing
+        heading_error = wrap(heading - yaw_base)
+        # Push while the end-effector is near the contact point (behind it, or pressed into the face), the base
+        # faces along the push and stands behind the object: the end-effector's own position absorbs the arm's
+        # deflection under load.
+        ee_along, ee_lateral = ((p_ee - contact) * push_dir).sum(1), ((p_ee - contact) * side_dir).sum(1)
+        base_along = ((p_base - p_obj) * push_dir).sum(1)  # < -depth: behind the object
+        on_face = np.abs(offset + ee_lateral) < cfg.face_share * half_width
+        pushing = ((np.abs(heading_error) < cfg.align_tolerance) & (np.abs(ee_lateral) < cfg.line_tolerance) & on_face
+                   & (ee_along > -cfg.engage_distance) & (ee_along < cfg.slip_margin) & (base_along < -depth - 0.2))
         speed = np.where(turning, cfg.turn_speed, np.minimum(cfg.push_speed, cfg.turn_speed + distance))  # slow near the goal
-        target = np.where(pushing[:, None], stand + push_dir, np.where(go_around[:, None], around, behind))
-        error = target - p_base
+        push_velocity = push_dir * speed[:, None] - side_dir * (cfg.lateral_gain * ee_lateral)[:, None]
+        # Otherwise walk to the stance behind the contact, around the object if the base is not behind it.
+        stand = contact - push_dir * cfg.ee_ahead
+        behind = stand - 0.3 * push_dir
+        # Walking around: along the circle of ``radius`` about the object, toward the bearing behind it, at most
+        # ``around_step`` of arc ahead of the base's own bearing (a straight line would cut through the object).
+        radius = np.maximum(depth, half_width) + cfg.clearance
+        bearing = np.arctan2(p_base[:, 1] - p_obj[:, 1], p_base[:, 0] - p_obj[:, 0])
+        bearing_step = np.clip(wrap(heading + np.pi - bearing), -cfg.around_step, cfg.around_step)
+        around = p_obj + radius[:, None] * np.stack([np.cos(bearing + bearing_step), np.sin(bearing + bearing_step)], axis=1)
+        go_around = (base_along > -depth - cfg.behind_margin) & ~pushing
+        target = np.where(go_around[:, None], around, behind)
+        walk_velocity = 2.0 * (target - p_base)
+        walk_speed = np.linalg.norm(walk_velocity, axis=1, keepdims=True)
+        walk_velocity *= np.minimum(1.0, cfg.approach_speed / np.maximum(walk_speed, 1e-9))
+        velocity = np.where(pushing[:, None], push_velocity, walk_velocity)  # world frame
         c, s = np.cos(yaw_base), np.sin(yaw_base)
-        limit = np.where(pushing, speed, cfg.approach_speed)
-        vx = np.clip(2.0 * (c * error[:, 0] + s * error[:, 1]), -limit, limit)
-        vy = np.clip(2.0 * (-s * error[:, 0] + c * error[:, 1]), -0.5, 0.5)
-        yaw_rate = np.clip(2.5 * wrap(heading - yaw_base), -1.0, 1.0)
+        vx = np.clip(c * velocity[:, 0] + s * velocity[:, 1], -1.0, 1.0)
+        vy = np.clip(-s * velocity[:, 0] + c * velocity[:, 1], -0.5, 0.5)
+        # While pushing, turning the base also swings the end-effector (ee_ahead in front) across the push.
+        yaw_rate = np.clip(2.5 * heading_error - np.where(pushing, cfg.lateral_yaw_gain * ee_lateral, 0.0), -1.0, 1.0)
         done = (distance < self.done_distance) & (np.abs(yaw_error) < self.done_angle)
         vx, vy, yaw_rate = np.where(done, -0.3, vx), np.where(done, 0.0, vy), np.where(done, 0.0, yaw_rate)
-        low = pushing | done
+        low = ~go_around | done  # the push pose, except while walking around the object
         pitch = np.where(low, cfg.push_pitch, self.base_default[4])
         height = np.where(low, cfg.push_height, self.base_default[5])
+        self.phase = np.select([done, turning & pushing, pushing, go_around], [4, 3, 2, 1], 0)
+        self.low = low
+        self.debug = dict(align=np.abs(heading_error) < cfg.align_tolerance, lateral=np.abs(ee_lateral) < cfg.line_tolerance, on_face=on_face,
+                          engaged=ee_along > -cfg.engage_distance, not_slipped=ee_along < cfg.slip_margin, behind=base_along < -depth - 0.2, turning=turning,
+                          num=dict(offset=offset, ee_lat=ee_lateral, hw=half_width, rel_yaw=wrap(yaw_obj - heading), ee_along=ee_along, yaw_err=yaw_error))
         command = np.stack([vx, vy, yaw_rate, 0 * vx, pitch, height], axis=1)
         actions = np.zeros((self.env.num_envs, self.env.num_actions), dtype=np.float32)
         actions[:, :6] = (command - self.base_default) / self.base_scale
-        actions[:, 6:] = np.asarray(cfg.push_arm_action, dtype=np.float32)
+        actions[:, 6:] = np.where(low[:, None], np.asarray(cfg.push_arm_action), np.asarray(cfg.carry_arm_action))
         return actions

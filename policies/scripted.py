@@ -4,13 +4,18 @@ that :mod:`dynpush.policies.imitation` distils into a policy.
 Per world, from the true poses (world frame, m, rad) it commands the push environment with the policy's
 own 11 actions (6D base command and 5 arm joints about their defaults):
 
-1. **Approach**: go around the object (keeping ``clearance`` from its surface) to a point behind it on
-   the line from the goal through the object, facing the goal.
+1. **Approach**: walk to a stance behind the object on the line from the goal through the object, facing
+   the goal. A base that is not yet behind the object walks around it along a circle ``clearance`` from its
+   surface, with the arm pulled in (``carry_arm_action``) so that turning near the object does not sweep
+   the arm through it.
 2. **Push** toward the goal at ``push_speed`` with the end-effector low on the object's rear face
    (``push_arm_action``, ``push_height``: the end-effector about 0.1 m above the floor, so that the
-   push does not tip narrow objects on high-friction floors). The contact is shifted sideways by
-   ``yaw_gain`` per radian of yaw error (at most ``max_offset`` of the face): a push that misses the
-   centre of mass turns the object, so the object's yaw is steered toward the goal's while it moves.
+   push does not tip narrow objects on high-friction floors). The push is steered on the measured
+   end-effector position, not the base's: under load the arm deflects by up to ~0.25 m. The base's
+   sideways velocity and yaw rate keep the end-effector on the contact point as the object turns. The
+   contact is shifted sideways by ``yaw_gain`` per radian of yaw error (at most ``max_offset`` of the
+   face). A push that misses the centre of mass turns the object, so the yaw is steered toward the
+   goal's while the object moves.
 3. **Turn**: within ``turn_radius`` of the goal with the yaw still off, push along the robot's heading
    at the largest offset, slowly, which turns the object more than it moves it.
 4. **Release**: at the goal (position and yaw within ``0.6`` of the success tolerances) back away.
@@ -49,10 +54,10 @@ class ScriptedPusherConfig:
     push_height: float = 0.42  # m, base height command while pushing
     push_pitch: float = 0.15  # rad, base pitch command while pushing (nose down)
     ee_ahead: float = 0.86  # m
-    yaw_gain: float = 0.5  # m of contact offset per rad of yaw error
-    max_offset: float = 0.4  # share of the face's half width the contact may be shifted
+    yaw_gain: float = 1.0  # m of contact offset per rad of yaw error
+    max_offset: float = 0.6  # share of the face's half width the contact may be shifted
     turn_radius: float = 0.08  # m: closer than this to the goal, only the yaw is corrected
-    turn_speed: float = 0.15  # m/s
+    turn_speed: float = 0.3  # m/s
     align_tolerance: float = 0.4  # rad between the base heading and the push direction while pushing
     line_tolerance: float = 0.25  # m between the end-effector and the contact point across the push
     face_share: float = 0.9  # share of the face's half width the end-effector may be off its centre while pushing
@@ -149,11 +154,6 @@ class ScriptedPusher:
         low = ~go_around | done  # the push pose, except while walking around the object
         pitch = np.where(low, cfg.push_pitch, self.base_default[4])
         height = np.where(low, cfg.push_height, self.base_default[5])
-        self.phase = np.select([done, turning & pushing, pushing, go_around], [4, 3, 2, 1], 0)
-        self.low = low
-        self.debug = dict(align=np.abs(heading_error) < cfg.align_tolerance, lateral=np.abs(ee_lateral) < cfg.line_tolerance, on_face=on_face,
-                          engaged=ee_along > -cfg.engage_distance, not_slipped=ee_along < cfg.slip_margin, behind=base_along < -depth - 0.2, turning=turning,
-                          num=dict(offset=offset, ee_lat=ee_lateral, hw=half_width, rel_yaw=wrap(yaw_obj - heading), ee_along=ee_along, yaw_err=yaw_error))
         command = np.stack([vx, vy, yaw_rate, 0 * vx, pitch, height], axis=1)
         actions = np.zeros((self.env.num_envs, self.env.num_actions), dtype=np.float32)
         actions[:, :6] = (command - self.base_default) / self.base_scale

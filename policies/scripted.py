@@ -9,8 +9,9 @@ own 11 actions (6D base command and 5 arm joints about their defaults):
    surface, with the arm pulled in (``carry_arm_action``) so that turning near the object does not sweep
    the arm through it.
 2. **Push** toward the goal at ``push_speed`` with the end-effector low on the object's rear face
-   (``push_arm_action``, ``push_height``: the end-effector about 0.1 m above the floor, so that the
-   push does not tip narrow objects on high-friction floors). The push is steered on the measured
+   (``push_arm_action``, ``push_height``: the end-effector about 0.18 m above the floor, so that the
+   push does not tip narrow objects on high-friction floors; pitching the base further down lowers it
+   but brings the elbow onto the object). The push is steered on the measured
    end-effector position, not the base's: under load the arm deflects by up to ~0.25 m. The base's
    sideways velocity and yaw rate keep the end-effector on the contact point as the object turns. The
    contact is shifted sideways by ``yaw_gain`` per radian of yaw error (at most ``max_offset`` of the
@@ -41,18 +42,18 @@ def wrap(angle: np.ndarray) -> np.ndarray:
 class ScriptedPusherConfig:
     """Gains and geometry of :class:`ScriptedPusher` (ours: tuned on the training distribution)."""
 
-    push_speed: float = 0.5  # m/s while in contact, far from the goal (slower within 0.35 m)
-    approach_speed: float = 0.8  # m/s
+    push_speed: float = 0.65  # m/s while in contact, far from the goal (slower within 0.35 m)
+    approach_speed: float = 1.0  # m/s
     clearance: float = 0.9  # m between the base path and the object's surface while going around it
     # Arm actions of the push pose (SH_ROT, SH_FLE, EL_FLE, FA_ROT, WRIST_1, in units of the action
-    # scale): shoulder forward, wrist down. With the base at push_height the end-effector is ~0.1 m
-    # above the floor and ee_ahead in front of the base origin (measured in the environment).
+    # scale): shoulder forward, wrist down. With the base at push_height and push_pitch the end-effector is
+    # ~0.18 m above the floor and ee_ahead in front of the base origin (measured in the environment).
     push_arm_action: tuple[float, ...] = (0.0, 0.2, -0.8, 0.0, 0.6)
-    # Arm actions while walking: the end-effector pulled in to ~0.46 m ahead of the base origin, 0.5 m high,
-    # so that turning near the object does not sweep the arm through it.
-    carry_arm_action: tuple[float, ...] = (0.0, -1.0, 2.0, 0.0, 0.0)
+    # Arm actions while walking: the end-effector pulled in (the elbow command stays inside its limit), so
+    # that turning near the object does not sweep the arm through it.
+    carry_arm_action: tuple[float, ...] = (0.0, -1.0, 1.6, 0.0, 0.0)
     push_height: float = 0.42  # m, base height command while pushing
-    push_pitch: float = 0.15  # rad, base pitch command while pushing (nose down)
+    push_pitch: float = 0.05  # rad, base pitch command while pushing (nose down)
     ee_ahead: float = 0.86  # m
     yaw_gain: float = 1.0  # m of contact offset per rad of yaw error
     max_offset: float = 0.6  # share of the face's half width the contact may be shifted

@@ -61,3 +61,22 @@ def test_pushes_a_cuboid_to_its_goal(small_env, goal_yaw_deg):
             best_yaw_error = min(best_yaw_error, abs(float(wrap(goal[2] - yaw_of(obj[3:])))))
     assert best_distance < 0.1
     assert best_yaw_error < math.radians(10.0)
+
+
+def test_walks_around_the_object_within_command_limits(small_env):
+    """From the goal's side of the object: the expert walks around it without touching it with anything but
+    the end-effector, never commands the base or arm outside their limits, and then pushes it toward the goal."""
+    env = small_env
+    episode = EpisodeSpec(dims=(0.5, 0.4, 0.6), mass=4.0, friction=0.6, goal=(1.2, 0.3, 0.0), base=(1.4, -0.4, 3.0))
+    env.set_episodes({w: episode for w in range(env.num_envs)})
+    pusher = ScriptedPusher(env)
+    limit_groups = [i for i, (name, _) in enumerate(env.constraint_groups) if name in ("base_command", "arm_command")]
+    goal = np.array(episode.goal[:2])
+    start_distance = float(np.linalg.norm(pusher.probe.object()[0, :2] - goal))
+    for _ in range(500):
+        env.step(torch.from_numpy(pusher(None)))
+        assert not (env.reset_t != 0).any(), "episode ended early (object toppled or robot fell)"
+        assert not env.violated_groups_t[:, limit_groups].any(), "a base or arm command outside its limits"
+        assert not env.task.contacts.numpy()[:, :-1].any(), "a robot part other than the end-effector touched the object"
+    distance = float(np.linalg.norm(pusher.probe.object()[0, :2] - goal))
+    assert distance < start_distance - 0.3

@@ -91,13 +91,28 @@ def read_progress(run_dir: Path) -> list[dict]:
     return [records[it] for it in sorted(records)]
 
 
-def imitation_summary(run_dir: Path) -> dict | None:
-    """Rounds, world-steps and wall-clock [h] of the DAgger phase of a run started by ``dynpush imitate``
-    (``imitation.jsonl``); None for a run trained from scratch."""
+def imitation_rounds(run_dir: Path) -> list[dict]:
+    """The DAgger rounds of a run started by ``dynpush imitate`` (``imitation.jsonl``); empty for a run
+    trained from scratch."""
     path = Path(run_dir) / "imitation.jsonl"
     if not path.exists():
+        return []
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def training_records(run_dir: Path) -> list[dict]:
+    """The CaT-PPO iterations of a run (``read_progress``); empty for a run that has only its DAgger rounds."""
+    if imitation_rounds(run_dir) and not (Path(run_dir) / "progress.jsonl").exists():
+        return []
+    return read_progress(run_dir)
+
+
+def imitation_summary(run_dir: Path) -> dict | None:
+    """Rounds, world-steps and wall-clock [h] of the DAgger phase of a run started by ``dynpush imitate``;
+    None for a run trained from scratch."""
+    rounds = imitation_rounds(run_dir)
+    if not rounds:
         return None
-    rounds = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
     return {"rounds": len(rounds), "world_steps": sum(r["world_steps"] for r in rounds),
             "wall_clock_h": sum(r["seconds"] for r in rounds) / 3600.0}
 
@@ -126,11 +141,11 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     """
     from matplotlib.figure import Figure
 
-    records = read_progress(run_dir)
-    if not records:
+    records, rounds = training_records(run_dir), imitation_rounds(run_dir)
+    if not records and not rounds:
         raise ValueError(f"{run_dir}/progress.jsonl has no iterations yet")
-    imitation = imitation_summary(run_dir)
-    imitation_hours = imitation["wall_clock_h"] if imitation else 0.0  # CaT-PPO starts after DAgger
+    round_hours = np.cumsum([r["seconds"] for r in rounds]) / 3600.0
+    imitation_hours = float(round_hours[-1]) if rounds else 0.0  # CaT-PPO starts after DAgger
     hours = imitation_hours + wall_clock_hours(records)
 
     def series(key: str) -> np.ndarray:
@@ -145,40 +160,52 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
 
     success, toppled = smooth(100.0 * series("/episode/success")), smooth(100.0 * series("/episode/toppled"))
     difficulty = series("/curriculum/goal_difficulty")
-    fig = Figure(figsize=(8.0, 7.5), layout="constrained")
-    ax_rate, ax_reward, ax_delta = fig.subplots(3, 1, sharex=True)
-    ax_rate.plot(hours, success, color="tab:green", label="success (episodes ended in the iteration)")
-    ax_rate.plot(hours, toppled, color="tab:red", label="toppled")
+    fig = Figure(figsize=(8.0, 7.5 if records else 3.5), layout="constrained")
+    axes = list(np.atleast_1d(fig.subplots(3 if records else 1, 1, sharex=True)))  # a DAgger-only run: rates only
+    ax_rate = axes[0]
+    if records:
+        ax_rate.plot(hours, success, color="tab:green", label="success (episodes ended in the iteration)")
+        ax_rate.plot(hours, toppled, color="tab:red", label="toppled")
     if paper_success_percent is not None:
         ax_rate.axhline(paper_success_percent, color="tab:green", ls=":", label=f"paper success {paper_success_percent} %")
     if np.isfinite(difficulty).any():
         ax_rate.plot(hours, 100.0 * difficulty, color="gray", ls="--", label="curriculum goal difficulty x 100")
+    if rounds:
+        ax_rate.plot(round_hours, [100.0 * r["success_rate"] for r in rounds], "o-", color="tab:green", ms=3, alpha=0.6,
+                     label="DAgger round: success (noisy rollouts, expert share 0.5^round)")
+        ax_rate.plot(round_hours, [100.0 * r["toppled_rate"] for r in rounds], "o-", color="tab:red", ms=3, alpha=0.6,
+                     label="DAgger round: toppled")
     ax_rate.set_ylabel("% of ended episodes")
     ax_rate.set_ylim(-2, 102)
     ax_rate.legend(fontsize=8, loc="upper left")
-    for key, color in (("/reward/task", "tab:blue"), ("/reward/reach", "tab:orange"), ("/reward/object_velocity", "tab:purple")):
-        ax_reward.plot(hours, smooth(series(key)), color=color, label=key.rsplit("/", 1)[-1] + " reward term (unweighted, mean over worlds)")
-    ax_reward.set_ylabel("reward")
-    ax_reward.legend(fontsize=8, loc="upper left")
-    ax_delta.plot(hours, smooth(series("CaT/mean_delta")), color="k", label="CaT mean termination probability delta")
-    ax_delta.set_ylabel("delta")
-    ax_delta.set_xlabel("training wall-clock [h]")
-    ax_delta.legend(fontsize=8, loc="upper left")
-    for ax in (ax_rate, ax_reward, ax_delta):
+    if records:
+        ax_reward, ax_delta = axes[1:]
+        for key, color in (("/reward/task", "tab:blue"), ("/reward/reach", "tab:orange"), ("/reward/object_velocity", "tab:purple")):
+            ax_reward.plot(hours, smooth(series(key)), color=color, label=key.rsplit("/", 1)[-1] + " reward term (unweighted, mean over worlds)")
+        ax_reward.set_ylabel("reward")
+        ax_reward.legend(fontsize=8, loc="upper left")
+        ax_delta.plot(hours, smooth(series("CaT/mean_delta")), color="k", label="CaT mean termination probability delta")
+        ax_delta.set_ylabel("delta")
+        ax_delta.legend(fontsize=8, loc="upper left")
+    axes[-1].set_xlabel("training wall-clock [h]")
+    for ax in axes:
         ax.grid(alpha=0.3)
         if imitation_hours > 0.0:
             ax.axvspan(0.0, imitation_hours, color="gold", alpha=0.25, lw=0)
     if marked_iteration is not None:
         done = [h for r, h in zip(records, hours) if r["iteration"] < marked_iteration]
         marked_hours = done[-1] if done else imitation_hours
-        for ax in (ax_rate, ax_reward, ax_delta):
+        for ax in axes:
             ax.axvline(marked_hours, color="k", ls=":", lw=1.0)
-        ax_rate.text(marked_hours, 95.0, f" checkpoint after {marked_iteration} iterations", fontsize=8, va="top")
+        ax_rate.text(marked_hours, 95.0, f" shipped checkpoint: {marked_iteration} CaT-PPO iterations", fontsize=8, va="top")
     if imitation_hours > 0.0:
         ax_rate.text(0.5 * imitation_hours, 50.0, "DAgger from the\nscripted pusher", ha="center", va="center", fontsize=8)
-    fig.suptitle(f"{Path(run_dir).name}: {len(records)} iterations in {hours[-1]:.2f} h"
-                 f" (smoothed over {SMOOTHING} iterations)")
+    total_hours = float(hours[-1]) if records else imitation_hours
+    fig.suptitle(f"{Path(run_dir).name}: {len(rounds)} DAgger rounds, {len(records)} CaT-PPO iterations in {total_hours:.2f} h"
+                 f" (iterations smoothed over {SMOOTHING})")
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
-    return {"iterations": len(records), "hours": float(hours[-1]), "success_percent": float(success[-1]),
-            "toppled_percent": float(toppled[-1])}
+    last = rounds[-1] if not records else None  # a DAgger-only run ends with its last round
+    return {"iterations": len(records), "hours": total_hours,
+            "success_percent": 100.0 * last["success_rate"] if last else float(success[-1]),
+            "toppled_percent": 100.0 * last["toppled_rate"] if last else float(toppled[-1])}

@@ -18,7 +18,7 @@ import torch
 
 from .evaluate import EvalConfig, evaluate
 from .export import OnnxPolicy, export_policy, load_run_config, resolve_checkpoint
-from .progress import imitation_summary, plot_learning_curve, read_progress, wall_clock_hours
+from .progress import imitation_summary, plot_learning_curve, training_records, wall_clock_hours
 
 
 def read_launches(run_dir: Path) -> list[dict]:
@@ -40,7 +40,7 @@ def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: 
     result = evaluate(policy_path, EvalConfig(episodes=episodes, seed=seed), out_dir)
     iteration = int(torch.load(checkpoint_path, weights_only=False, map_location="cpu")["iter"])  # completed iterations
     plot_learning_curve(run_dir, out_dir / "learning_curve.png", result["paper"]["success_rate"], iteration)
-    trained = [r for r in read_progress(run_dir) if r["iteration"] < iteration]
+    trained = [r for r in training_records(run_dir) if r["iteration"] < iteration]
     imitation = imitation_summary(run_dir)
     shutil.copyfile(run_dir / "config.json", out_dir / "training_config.json")
     record = {

@@ -53,6 +53,13 @@ def test_dagger_fits_the_expert_and_its_checkpoint_exports_and_fine_tunes(tmp_pa
         expected = fitted(observations_dict(observations)).numpy()
     np.testing.assert_allclose(policy(observations), expected, atol=1e-4)
 
+    from dynpush.policies.progress import plot_learning_curve
+
+    curve = plot_learning_curve(run, tmp_path / "curve.png")  # a DAgger-only run draws its rounds
+    assert (tmp_path / "curve.png").read_bytes()[:4] == b"\x89PNG"
+    assert curve["iterations"] == 0 and curve["success_percent"] == pytest.approx(100.0 * rounds[1]["success_rate"])
+    assert curve["hours"] == pytest.approx(sum(r["seconds"] for r in rounds) / 3600.0)
+
     runner = train(tiny(), run, resume=True)  # CaT-PPO continues from the imitation checkpoint: iterations 0 and 1
     assert runner.current_learning_iteration == 1
     assert [json.loads(line)["iteration"] for line in (run / "progress.jsonl").read_text().splitlines()] == [0, 1]

@@ -102,7 +102,8 @@ def imitation_rounds(run_dir: Path) -> list[dict]:
 
 def training_records(run_dir: Path) -> list[dict]:
     """The CaT-PPO iterations of a run (``read_progress``); empty for a run that has only its DAgger rounds."""
-    if imitation_rounds(run_dir) and not (Path(run_dir) / "progress.jsonl").exists():
+    run_dir = Path(run_dir)
+    if (run_dir / "imitation.jsonl").exists() and not (run_dir / "progress.jsonl").exists():
         return []
     return read_progress(run_dir)
 

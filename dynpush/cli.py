@@ -33,6 +33,7 @@ def _env_info(args: argparse.Namespace) -> int:
 
 
 def _train(args: argparse.Namespace) -> int:
+    from dynpush.policies.locomotion_train import LocomotionTrainConfig
     from dynpush.policies.train import TrainConfig, apply_overrides, launch_processes, train
     from dynpush.sim.config import ConfigError
 
@@ -43,8 +44,9 @@ def _train(args: argparse.Namespace) -> int:
         for i in reversed(drop):
             del argv[i : i + (1 if "=" in argv[i] else 2)]
         return launch_processes(args.procs, [*argv, "--launched-as", command])
-    cfg = apply_overrides(TrainConfig.preset_config(args.preset), args.set or [])
-    name = args.name or f"{args.preset}"
+    config_class = {"push": TrainConfig, "locomotion": LocomotionTrainConfig}[args.task]
+    cfg = apply_overrides(config_class.preset_config(args.preset), args.set or [])
+    name = args.name or (args.preset if args.task == "push" else f"{args.task}_{args.preset}")
     extend_to = None
     if args.resume and args.set:  # a resumed run keeps its config.json; only its length may change
         fields = sorted({item.split("=", 1)[0] for item in args.set})
@@ -77,7 +79,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--solver", default="xpbd")
     p.set_defaults(func=_env_info)
 
-    p = sub.add_parser("train", help="train a push policy with CaT-PPO (checkpoints and tensorboard in runs/NAME)")
+    p = sub.add_parser("train", help="train a push (or locomotion) policy with CaT-PPO (checkpoints and tensorboard in runs/NAME)")
+    p.add_argument("--task", choices=("push", "locomotion"), default="push",
+                   help="push: the goal-pushing policy (tracked base); locomotion: the legged 6D-command policy (MuJoCo-Warp)")
     p.add_argument("--preset", default="cpu", help="cpu (2-core machine) or paper (4096 envs, 20000 iterations, GPU)")
     p.add_argument("--name", default=None, help="run name (default: the preset)")
     p.add_argument("--runs", default="runs", help="folder of the runs")

@@ -9,6 +9,7 @@ torque limits, so an object that is too heavy slows the robot down as it would o
 
 import warp as wp
 
+from .frames import heading_roll_pitch, heading_yaw
 from .views import PushTask, RobotView
 
 wp.set_module_options({"enable_backward": False})
@@ -27,13 +28,6 @@ class BaseTrackingParams:
     max_torque: wp.vec3  # [N m] about base x, y, z
     attitude_inertia: wp.vec3  # effective stance inertia about base x, y [kg m^2]
     gravity: float  # [m/s^2], positive
-
-
-@wp.func
-def heading_yaw(q: wp.quat):
-    """Yaw [rad] of the base's x axis projected on the ground plane."""
-    x_axis = wp.quat_rotate(q, wp.vec3(1.0, 0.0, 0.0))
-    return wp.atan2(x_axis[1], x_axis[0])
 
 
 @wp.kernel
@@ -82,10 +76,9 @@ def apply_base_wrench(robot: RobotView, task: PushTask, params: BaseTrackingPara
 
     # Attitude: roll/pitch about the heading frame, yaw rate about world z.
     omega_h = wp.quat_rotate_inv(q_yaw, omega_w)
-    q_tilt = wp.quat_inverse(q_yaw) * q_b  # base orientation relative to its heading frame
-    z_h = wp.quat_rotate(q_tilt, wp.vec3(0.0, 0.0, 1.0))
-    roll = wp.atan2(-z_h[1], z_h[2])
-    pitch = wp.atan2(z_h[0], z_h[2])
+    roll_pitch = heading_roll_pitch(q_b, q_yaw)
+    roll = roll_pitch[0]
+    pitch = roll_pitch[1]
     tau_x = params.attitude_inertia[0] * (params.attitude_stiffness * (roll_cmd - roll) - params.attitude_damping * omega_h[0])
     tau_y = params.attitude_inertia[1] * (params.attitude_stiffness * (pitch_cmd - pitch) - params.attitude_damping * omega_h[1])
     tau_z = params.attitude_inertia[2] * params.yaw_rate_gain * (yaw_rate_cmd - omega_w[2])

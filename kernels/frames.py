@@ -34,3 +34,18 @@ def next_rng(seed: int, rng_counter: wp.array(dtype=int), w: int):
     state = wp.rand_init(seed, w + n * rng_counter[w])
     rng_counter[w] = rng_counter[w] + 1
     return state
+
+
+@wp.func
+def heading_yaw(q: wp.quat):
+    """Yaw [rad] of the body's x axis projected on the ground plane."""
+    x_axis = wp.quat_rotate(q, wp.vec3(1.0, 0.0, 0.0))
+    return wp.atan2(x_axis[1], x_axis[0])
+
+
+@wp.func
+def heading_roll_pitch(q: wp.quat, q_yaw: wp.quat):
+    """(roll, pitch) [rad] of orientation ``q`` relative to its heading frame ``q_yaw`` (:func:`heading_yaw`):
+    the tilt of the body's +z axis about the heading frame's x and y axes."""
+    z_h = wp.quat_rotate(wp.quat_inverse(q_yaw) * q, wp.vec3(0.0, 0.0, 1.0))
+    return wp.vec2(wp.atan2(-z_h[1], z_h[2]), wp.atan2(z_h[0], z_h[2]))

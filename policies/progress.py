@@ -21,8 +21,11 @@ SMOOTHING = 25  # learning curve: iterations averaged per point
 GROUP_ABBREVIATIONS = {
     "base_command": "base", "arm_command": "arm", "arm_action_rate": "rate", "arm_joint_position": "q",
     "arm_joint_velocity": "qd", "arm_joint_torque": "tau", "leg_joint_torque": "leg", "collision": "coll",
-    "object_balance": "bal",
+    "object_balance": "bal", "leg_joint_velocity": "legqd", "leg_joint_acceleration": "legqdd",
+    "leg_action_rate": "legrate", "foot_air_time": "air",
 }
+# Reward terms on the progress line: the push task's task and reach, every locomotion tracking term.
+LINE_REWARDS = ("task", "reach", "linear_velocity", "yaw_rate", "attitude", "height")
 
 
 def iteration_summary(ep_extras: list[dict]) -> dict[str, float]:
@@ -56,17 +59,16 @@ class ProgressLogger(Logger):
         if self.bar is None:
             self.bar = tqdm(total=total_it, initial=start_it, unit="it", dynamic_ncols=True)
         steps = self.cfg["num_steps_per_env"] * self.num_envs * self.gpu_world_size
-        violations = " ".join(
-            f"{abbr} {summary.get(f'CaT/violation_rate/{name}', float('nan')):.3f}"
-            for name, abbr in GROUP_ABBREVIATIONS.items()
-        )
+        rewards = " ".join(f"{key.rsplit('/', 1)[-1]} {value:.3f}" for key, value in summary.items()
+                           if key.startswith("/reward/") and key.rsplit("/", 1)[-1] in LINE_REWARDS)
+        episodes = " ".join(f"{key.rsplit('/', 1)[-1]} {value:.3f}" for key, value in summary.items()
+                            if key.startswith("/episode/") and key.count("/") == 2)
+        violations = " ".join(f"{GROUP_ABBREVIATIONS.get(key.rsplit('/', 1)[-1], key.rsplit('/', 1)[-1])} {value:.3f}"
+                              for key, value in summary.items() if key.startswith("CaT/violation_rate/"))
         episode_reward = sum(self.rewbuffer) / len(self.rewbuffer) if len(self.rewbuffer) else float("nan")
         self.bar.write(
             f"it {it:5d} | {steps / collect_time:7.0f} world-steps/s | sim {collect_time:5.2f}s update {learn_time:5.2f}s"
-            f" | episode reward {episode_reward:8.2f} task {summary.get('/reward/task', float('nan')):.3f}"
-            f" reach {summary.get('/reward/reach', float('nan')):.3f}"
-            f" | success {summary.get('/episode/success', float('nan')):.3f}"
-            f" toppled {summary.get('/episode/toppled', float('nan')):.3f}"
+            f" | episode reward {episode_reward:8.2f} {rewards} | {episodes}"
             f" | delta {summary.get('CaT/mean_delta', float('nan')):.4f} | violated: {violations}"
             + "".join(f" | {key.rsplit('/', 1)[-1]} {value:.3f}" for key, value in self.run_state.items())
         )

@@ -27,7 +27,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
     """On-policy runner for CaT-PPO with per-iteration schedules and exact resume.
 
     The environment must provide ``env.constraint_groups`` (``(name, dim)`` in column order), ``extras["constraints"]``
-    every step, ``env.set_reward_weight(name, weight)`` and ``env.state_dict()`` / ``env.load_state_dict()``.
+    every step, ``env.set_reward_weight(name, weight)`` (unless the schedule has no reach weight) and ``env.state_dict()`` / ``env.load_state_dict()``.
     ``train_cfg`` is rsl_rl's runner config; its optional ``"schedule"`` entry holds
     :class:`~dynpush.policies.schedules.ScheduleConfig` fields as a nested dict, and ``train_cfg["algorithm"]["class_name"]``
     defaults to :class:`CaTPPO`.
@@ -76,7 +76,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
     def apply_schedules(self, iteration: int, total_iterations: int) -> None:
         """Set ``p_max`` and the reach-reward weight for ``iteration`` of a run of ``total_iterations``."""
         self.alg.set_p_max(p_max_at(iteration, total_iterations, self.schedule_cfg, self.env.constraint_groups))
-        self.env.set_reward_weight("reach", reach_weight_at(iteration, total_iterations, self.schedule_cfg))
+        if self.schedule_cfg.reach is not None:
+            self.env.set_reward_weight("reach", reach_weight_at(iteration, total_iterations, self.schedule_cfg))
 
     def apply_curriculum(self, fresh_run: bool) -> None:
         """Sets the goal difficulty from the success rate of the episodes that ended since the last call."""

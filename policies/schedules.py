@@ -65,8 +65,8 @@ class ScheduleConfig:
     constraints: ConstraintCurriculumConfig = field(default_factory=ConstraintCurriculumConfig)
     """CaT ``p_max`` curricula."""
 
-    reach: ReachWeightConfig = field(default_factory=ReachWeightConfig)
-    """Reach-reward weight schedule."""
+    reach: ReachWeightConfig | None = field(default_factory=ReachWeightConfig)
+    """Reach-reward weight schedule; None for a task without a reach reward (locomotion)."""
 
     paper_iterations: int = 20000
     """Length of the paper's training run (Sec. "RL goal pushing environment": 20000 iterations)."""
@@ -83,9 +83,10 @@ class ScheduleConfig:
         constraints = dict(cfg.pop("constraints", {}))
         if "p_max" in constraints:
             constraints["p_max"] = {name: (float(a), float(b)) for name, (a, b) in constraints["p_max"].items()}
+        reach = cfg.pop("reach", {})
         return cls(
             constraints=ConstraintCurriculumConfig(**constraints),
-            reach=ReachWeightConfig(**cfg.pop("reach", {})),
+            reach=None if reach is None else ReachWeightConfig(**reach),
             **cfg,
         )
 

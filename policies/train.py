@@ -15,6 +15,7 @@ import os
 import signal
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import torch
 
@@ -25,6 +26,11 @@ from dynpush.kernels.constraints import CONSTRAINT_GROUPS
 from .curriculum import GoalCurriculumConfig
 from .runner import CaTOnPolicyRunner
 from .schedules import ConstraintCurriculumConfig
+
+if TYPE_CHECKING:
+    from dynpush.sim.locomotion_config import LocomotionEnvConfig
+
+    from .locomotion_train import LocomotionTrainConfig
 
 PRESETS = ("cpu", "paper")
 
@@ -110,6 +116,11 @@ class TrainConfig:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+    def make_env(self, env: PushEnvConfig):
+        from dynpush.sim.push_env import PushEnv
+
+        return PushEnv(env)
 
     @staticmethod
     def from_dict(data: dict) -> TrainConfig:
@@ -206,16 +217,17 @@ class ProcessGroup:
     def from_environment() -> ProcessGroup:
         return ProcessGroup(rank=int(os.getenv("RANK", "0")), world_size=int(os.getenv("WORLD_SIZE", "1")))
 
-    def shard(self, env: PushEnvConfig) -> PushEnvConfig:
+    def shard(self, env: PushEnvConfig | LocomotionEnvConfig) -> PushEnvConfig | LocomotionEnvConfig:
         """This rank's environment: ``env.num_envs`` worlds in all, split evenly; a seed per rank."""
         if env.num_envs % self.world_size:
             raise ConfigError(f"env.num_envs ({env.num_envs}) must be divisible by the number of processes ({self.world_size})")
         return dataclasses.replace(env, num_envs=env.num_envs // self.world_size, seed=env.seed + self.rank)
 
 
-def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, command: str | None = None,
+def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool = False, command: str | None = None,
           extend_to: int | None = None) -> CaTOnPolicyRunner:
-    """Trains (or resumes) a push policy into ``run_dir``; saves on Ctrl-C / SIGTERM.
+    """Trains (or resumes) a push or locomotion policy (the task of ``cfg``'s type) into ``run_dir``; saves on
+    Ctrl-C / SIGTERM.
 
     A resumed run uses its own ``config.json``; ``extend_to`` changes its length to that many
     iterations in all (schedules that scale with the run length follow the new length).
@@ -223,14 +235,12 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, command: str | 
     Under torchrun every process runs one shard of ``cfg.env.num_envs`` worlds; gradients and
     normaliser statistics are averaged across processes (rsl_rl), rank 0 logs and saves.
     """
-    from dynpush.sim.push_env import PushEnv
-
     group = ProcessGroup.from_environment()
     config_path = run_dir / "config.json"
     if resume:
         if not config_path.exists():
             raise FileNotFoundError(f"--resume: no {config_path}; start the run without --resume first")
-        cfg = TrainConfig.from_dict(json.loads(config_path.read_text()))
+        cfg = type(cfg).from_dict(json.loads(config_path.read_text()))
         if extend_to is not None:
             cfg.iterations = extend_to
     cfg.validate()
@@ -242,7 +252,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, command: str | 
         torch.set_num_threads(1)  # one core per process: Warp launches already use one
 
     torch.manual_seed(cfg.env.seed + group.rank)
-    env = PushEnv(group.shard(cfg.env))
+    env = cfg.make_env(group.shard(cfg.env))
     log_dir = str(run_dir) if group.rank == 0 else None
     runner = CaTOnPolicyRunner(env, cfg.runner_cfg(), log_dir=log_dir, device=env.device)
     if resume:

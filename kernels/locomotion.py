@@ -1,0 +1,459 @@
+"""Kernels of the locomotion task (issue 8): a legged robot tracks the 6D base command of the push policy.
+
+The command ``(vx, vy, yaw rate, roll, pitch, height)`` is the push policy's action space (paper III-C):
+vx, vy [m/s] in the heading frame, yaw rate [rad/s] about world z, roll and pitch [rad] of the base
+relative to its heading frame, height [m] of the base origin above the ground. The policy outputs 12
+leg joint position offsets: ``q_leg^target = q_leg^default + action_scale * a``; the joints' PD drives
+(stiffness ``k_p``, damping ``k_d``, effort limit from ``robot_legged.usda``) produce
+``tau = clip(k_p (q^target - q) - k_d qd, -effort, effort)``.
+
+Actor observation (61), the layout of the runtime's locomotion ONNX (``dynpush.runtime.config.LOCOMOTION_TERMS``,
+in that order, scale 1): ``base_linear_velocity_b`` (3), ``base_angular_velocity_b`` (3),
+``projected_gravity_b`` (3, ``R_b^T (0, 0, -1)``), ``base_command`` (6), ``leg_joint_position`` (12,
+``q - q_default``), ``leg_joint_velocity`` (12), ``last_leg_actions`` (12), ``arm_joint_position`` (5,
+``q - q_default``), ``arm_joint_velocity`` (5). Critic (67, noiseless): the same, then ``base_height``
+(1), ``foot_contact`` (4) and ``base_mass_offset`` (1).
+
+Constraints (CaT, violated where > 0), columns in ``CONSTRAINT_GROUPS`` order: leg joint torque
+``|tau| - tau_nominal`` (12), leg joint velocity ``|qd| - qd_max`` (12), leg joint acceleration
+``|qd_t - qd_{t-1}| / dt - qdd_max`` (12), leg action rate ``|a_t - a_{t-1}| / dt - rate_max`` (12),
+collision (5: the base box and each leg's knee and shank within ``collision_margin`` of the ground,
+the ground being the plane z = 0), foot air time ``t_min - t_air`` at each touchdown (4).
+
+Frames: ``_w`` world, ``_b`` base, ``_h`` heading frame (base yaw only). Legs LF, RF, LH, RH; joints HAA,
+HFE, KFE per leg (``dynpush.assets_usd.LEG_JOINT_NAMES``).
+"""
+
+import warp as wp
+
+from dynpush.runtime.config import LOCOMOTION_TERMS
+
+from .frames import heading_roll_pitch, heading_yaw, next_rng, yaw_quat
+
+wp.set_module_options({"enable_backward": False})
+
+NUM_LEG_JOINTS = 12
+NUM_FEET = 4
+NUM_COMMANDS = 6
+NUM_ARM_JOINTS = 5  # the 6th arm joint is frozen, as in the push task
+POLICY_TERMS = tuple(LOCOMOTION_TERMS.items())
+PRIVILEGED_TERMS = (("base_height", 1), ("foot_contact", NUM_FEET), ("base_mass_offset", 1))
+NUM_POLICY_OBS = sum(size for _, size in POLICY_TERMS)
+NUM_CRITIC_OBS = NUM_POLICY_OBS + sum(size for _, size in PRIVILEGED_TERMS)
+CONSTRAINT_GROUPS = (
+    ("leg_joint_torque", NUM_LEG_JOINTS),
+    ("leg_joint_velocity", NUM_LEG_JOINTS),
+    ("leg_joint_acceleration", NUM_LEG_JOINTS),
+    ("leg_action_rate", NUM_LEG_JOINTS),
+    ("collision", 1 + NUM_FEET),
+    ("foot_air_time", NUM_FEET),
+)
+NUM_CONSTRAINTS = sum(size for _, size in CONSTRAINT_GROUPS)
+REWARD_TERMS = ("linear_velocity", "yaw_rate", "attitude", "height")
+
+
+@wp.struct
+class LeggedView:
+    """Newton state of the legged robots and the indices that locate each world's robot in it."""
+
+    body_q: wp.array(dtype=wp.transform)  # world frame
+    body_qd: wp.array(dtype=wp.spatial_vector)  # (v_com_w, omega_w)
+    joint_q: wp.array(dtype=float)
+    joint_qd: wp.array(dtype=float)
+    base_body: wp.array(dtype=int)  # (N,)
+    base_q_start: wp.array(dtype=int)  # (N,) joint_q index of the free joint (p, quat xyzw)
+    base_qd_start: wp.array(dtype=int)  # (N,) joint_qd index of the free joint
+    robot_qd_count: int  # generalized velocities of one robot
+    leg_q: wp.array2d(dtype=int)  # (N, 12) joint_q index of each leg joint, LEG_JOINT_NAMES order
+    leg_qd: wp.array2d(dtype=int)  # (N, 12)
+    arm_q: wp.array2d(dtype=int)  # (N, 6) joint_q index of each arm joint (the last one is frozen)
+    arm_qd: wp.array2d(dtype=int)  # (N, 6)
+    shank_body: wp.array2d(dtype=int)  # (N, 4) the shank of each leg (carries knee, shank and foot)
+
+
+@wp.struct
+class LocomotionTask:
+    """Per-world buffers of the locomotion task."""
+
+    command: wp.array2d(dtype=float)  # (N, 6) absolute 6D base command
+    actions: wp.array2d(dtype=float)  # (N, 12) a_t, clipped
+    last_actions: wp.array2d(dtype=float)  # (N, 12) a_{t-1}
+    leg_target: wp.array2d(dtype=float)  # (N, 12) [rad]
+    leg_velocity_last: wp.array2d(dtype=float)  # (N, 12) qd of the previous control step [rad/s]
+    arm_target: wp.array2d(dtype=float)  # (N, 6) [rad], random arm motions
+    foot_contact: wp.array2d(dtype=int)  # (N, 4) 1 where the foot touches the ground this step
+    foot_air_time: wp.array2d(dtype=float)  # (N, 4) [s] since the foot left the ground
+    touchdown_air_time: wp.array2d(dtype=float)  # (N, 4) [s] air time ended by a touchdown this step, else -1
+    base_mass_offset: wp.array(dtype=float)  # (N,) [kg] drawn once per world when the environment is built
+    episode_step: wp.array(dtype=int)
+    next_command_step: wp.array(dtype=int)
+    next_arm_step: wp.array(dtype=int)
+    next_push_step: wp.array(dtype=int)
+    rng_counter: wp.array(dtype=int)
+
+
+@wp.struct
+class LocomotionParams:
+    """Actions, command sampling and randomization (``LocomotionEnvConfig``)."""
+
+    leg_default: wp.array(dtype=float)  # (12,) [rad]
+    arm_default: wp.array(dtype=float)  # (6,) [rad]
+    arm_lower: wp.array(dtype=float)  # (6,) [rad]
+    arm_upper: wp.array(dtype=float)  # (6,) [rad]
+    action_scale: float  # [rad] per unit action
+    clip: float
+    command_lower: wp.array(dtype=float)  # (6,)
+    command_upper: wp.array(dtype=float)  # (6,)
+    standing_probability: float  # share of commands with zero vx, vy and yaw rate
+    command_interval: wp.vec2  # [steps] between command changes
+    arm_amplitude: float  # [rad] arm targets uniform within default +- amplitude (clipped to the limits)
+    arm_interval: wp.vec2  # [steps] between arm target changes
+    push_interval: wp.vec2  # [steps] between base pushes
+    push_velocity: float  # [m/s] max horizontal velocity change of a push
+    start_height: float  # [m] base height at reset
+    leg_position_noise: float  # [rad] leg joints uniform within default +- noise at reset
+
+
+@wp.struct
+class LeggedLimits:
+    """Drive law, contact geometry and constraint limits."""
+
+    stiffness: wp.array(dtype=float)  # (12,) [N m/rad]
+    damping: wp.array(dtype=float)  # (12,) [N m s/rad]
+    effort_limit: wp.array(dtype=float)  # (12,) [N m] the drives' peak torque
+    nominal_torque: wp.array(dtype=float)  # (12,) [N m] constraint limit
+    velocity_limit: wp.array(dtype=float)  # (12,) [rad/s] constraint limit
+    acceleration_limit: float  # [rad/s^2]
+    action_rate_limit: float  # [1/s] of raw action units
+    air_time_min: float  # [s]
+    control_dt: float  # [s]
+    foot_offset: wp.vec3  # foot sphere centre in the shank frame [m]
+    foot_radius: float  # [m]
+    contact_margin: float  # [m] a foot within this of the ground counts as touching
+    knee_radius: float  # [m] thigh capsule radius about the knee (the shank frame origin)
+    shank_end: wp.vec3  # lower cap centre of the shank capsule in the shank frame [m]
+    shank_radius: float  # [m]
+    base_half_extents: wp.vec3  # [m] of the base box collider, centred on the base frame
+    collision_margin: float  # [m] clearance below which a part counts as touching the ground
+    base_tilt: float  # [rad] termination
+    base_min_height: float  # [m] termination
+    max_episode_steps: int
+
+
+@wp.struct
+class LocomotionRewardParams:
+    """Tracking kernels ``exp(-e^2 / sigma)`` and their weights."""
+
+    sigma_linear_velocity: float  # [m^2/s^2]
+    sigma_yaw_rate: float  # [rad^2/s^2]
+    sigma_attitude: float  # [rad^2]
+    sigma_height: float  # [m^2]
+    weights: wp.array(dtype=float)  # (4,) REWARD_TERMS order
+
+
+@wp.func
+def leg_torque(view: LeggedView, task: LocomotionTask, limits: LeggedLimits, w: int, j: int):
+    """Torque [N m] of leg joint ``j`` under its PD drive towards ``task.leg_target``."""
+    q = view.joint_q[view.leg_q[w, j]]
+    qd = view.joint_qd[view.leg_qd[w, j]]
+    tau = limits.stiffness[j] * (task.leg_target[w, j] - q) - limits.damping[j] * qd
+    return wp.clamp(tau, -limits.effort_limit[j], limits.effort_limit[j])
+
+
+@wp.func
+def heading_velocities(q_b: wp.quat, qd_b: wp.spatial_vector):
+    """(vx_h, vy_h, yaw rate): base velocity in the heading frame [m/s] and angular velocity about world z [rad/s]."""
+    v_h = wp.quat_rotate_inv(yaw_quat(heading_yaw(q_b)), wp.spatial_top(qd_b))
+    return wp.vec3(v_h[0], v_h[1], wp.spatial_bottom(qd_b)[2])
+
+
+@wp.func
+def sample_command(rng: wp.uint32, params: LocomotionParams, task: LocomotionTask, w: int):
+    standing = wp.randf(rng) < params.standing_probability
+    for i in range(NUM_COMMANDS):
+        value = wp.randf(rng, params.command_lower[i], params.command_upper[i])
+        if standing and i < 3:
+            value = 0.0
+        task.command[w, i] = value
+
+
+@wp.func
+def sample_arm_target(rng: wp.uint32, params: LocomotionParams, task: LocomotionTask, w: int):
+    for j in range(NUM_ARM_JOINTS):
+        target = params.arm_default[j] + wp.randf(rng, -params.arm_amplitude, params.arm_amplitude)
+        task.arm_target[w, j] = wp.clamp(target, params.arm_lower[j], params.arm_upper[j])
+    task.arm_target[w, NUM_ARM_JOINTS] = params.arm_default[NUM_ARM_JOINTS]
+
+
+@wp.func
+def steps_in(rng: wp.uint32, interval: wp.vec2):
+    return int(wp.randf(rng, interval[0], interval[1]))
+
+
+@wp.kernel
+def start_episodes(
+    reset: wp.array(dtype=int),
+    seed: int,
+    params: LocomotionParams,
+    view: LeggedView,
+    task: LocomotionTask,
+):
+    """Starts a new episode in every world with ``reset[w] != 0``.
+
+    Base at the origin, ``start_height`` above the ground, uniform yaw; legs at their default plus
+    uniform noise, the arm at its default; all velocities zero; a new command, arm target and event
+    schedule. The environment runs forward kinematics afterwards.
+    """
+    w = wp.tid()
+    if reset[w] == 0:
+        return
+    rng = next_rng(seed, task.rng_counter, w)
+    q0 = view.base_q_start[w]
+    pose = wp.transform(wp.vec3(0.0, 0.0, params.start_height), yaw_quat(wp.randf(rng, -wp.pi, wp.pi)))
+    for i in range(7):
+        view.joint_q[q0 + i] = pose[i]
+    for i in range(view.robot_qd_count):
+        view.joint_qd[view.base_qd_start[w] + i] = 0.0
+    for j in range(NUM_LEG_JOINTS):
+        q = params.leg_default[j] + wp.randf(rng, -params.leg_position_noise, params.leg_position_noise)
+        view.joint_q[view.leg_q[w, j]] = q
+        task.leg_target[w, j] = q
+        task.leg_velocity_last[w, j] = 0.0
+        task.actions[w, j] = 0.0
+        task.last_actions[w, j] = 0.0
+    for j in range(NUM_ARM_JOINTS + 1):
+        view.joint_q[view.arm_q[w, j]] = params.arm_default[j]
+        task.arm_target[w, j] = params.arm_default[j]
+    for f in range(NUM_FEET):
+        task.foot_contact[w, f] = 1
+        task.foot_air_time[w, f] = 0.0
+        task.touchdown_air_time[w, f] = -1.0
+    sample_command(rng, params, task, w)
+    task.episode_step[w] = 0
+    task.next_command_step[w] = steps_in(rng, params.command_interval)
+    task.next_arm_step[w] = steps_in(rng, params.arm_interval)
+    task.next_push_step[w] = steps_in(rng, params.push_interval)
+
+
+@wp.kernel
+def apply_events(seed: int, params: LocomotionParams, view: LeggedView, task: LocomotionTask):
+    """Scheduled events of a running episode: a new command, a new arm target, a base push (a uniform
+    horizontal velocity change of the free joint)."""
+    w = wp.tid()
+    step = task.episode_step[w]
+    if step >= task.next_command_step[w]:
+        rng = next_rng(seed, task.rng_counter, w)
+        sample_command(rng, params, task, w)
+        task.next_command_step[w] = step + steps_in(rng, params.command_interval)
+    if step >= task.next_arm_step[w]:
+        rng = next_rng(seed, task.rng_counter, w)
+        sample_arm_target(rng, params, task, w)
+        task.next_arm_step[w] = step + steps_in(rng, params.arm_interval)
+    if step >= task.next_push_step[w]:
+        rng = next_rng(seed, task.rng_counter, w)
+        d0 = view.base_qd_start[w]
+        view.joint_qd[d0 + 0] = view.joint_qd[d0 + 0] + wp.randf(rng, -params.push_velocity, params.push_velocity)
+        view.joint_qd[d0 + 1] = view.joint_qd[d0 + 1] + wp.randf(rng, -params.push_velocity, params.push_velocity)
+        task.next_push_step[w] = step + steps_in(rng, params.push_interval)
+
+
+@wp.kernel
+def process_actions(
+    raw_actions: wp.array2d(dtype=float),
+    params: LocomotionParams,
+    view: LeggedView,
+    task: LocomotionTask,
+    joint_target_q: wp.array(dtype=float),
+):
+    """Shifts the action history, clips the actions (non-finite counts as zero) and writes the leg and
+    arm joint targets."""
+    w = wp.tid()
+    for j in range(NUM_LEG_JOINTS):
+        a = raw_actions[w, j]
+        if not wp.isfinite(a):
+            a = 0.0
+        task.last_actions[w, j] = task.actions[w, j]
+        task.actions[w, j] = wp.clamp(a, -params.clip, params.clip)
+        target = params.leg_default[j] + params.action_scale * task.actions[w, j]
+        task.leg_target[w, j] = target
+        joint_target_q[view.leg_q[w, j]] = target
+    for j in range(NUM_ARM_JOINTS + 1):
+        joint_target_q[view.arm_q[w, j]] = task.arm_target[w, j]
+
+
+@wp.kernel
+def update_feet(view: LeggedView, limits: LeggedLimits, task: LocomotionTask):
+    """Foot contact (the foot sphere within ``contact_margin`` of the ground) and air time after the physics."""
+    w = wp.tid()
+    for f in range(NUM_FEET):
+        foot = wp.transform_point(view.body_q[view.shank_body[w, f]], limits.foot_offset)
+        contact = foot[2] - limits.foot_radius < limits.contact_margin
+        task.touchdown_air_time[w, f] = -1.0
+        if contact:
+            if task.foot_contact[w, f] == 0:
+                task.touchdown_air_time[w, f] = task.foot_air_time[w, f] + limits.control_dt
+            task.foot_air_time[w, f] = 0.0
+        else:
+            task.foot_air_time[w, f] = task.foot_air_time[w, f] + limits.control_dt
+        task.foot_contact[w, f] = wp.where(contact, 1, 0)
+
+
+@wp.kernel
+def compute_rewards(
+    view: LeggedView,
+    task: LocomotionTask,
+    params: LocomotionRewardParams,
+    reward: wp.array(dtype=float),
+    reward_terms: wp.array2d(dtype=float),
+):
+    """Tracking rewards of the 6D command: ``w_i exp(-e_i^2 / sigma_i)`` for the heading-frame velocity
+    (vx, vy), the yaw rate, the attitude (roll, pitch) and the base height."""
+    w = wp.tid()
+    x_b = view.body_q[view.base_body[w]]
+    q_b = wp.transform_get_rotation(x_b)
+    velocity = heading_velocities(q_b, view.body_qd[view.base_body[w]])
+    roll_pitch = heading_roll_pitch(q_b, yaw_quat(heading_yaw(q_b)))
+    e_v = wp.vec2(task.command[w, 0] - velocity[0], task.command[w, 1] - velocity[1])
+    e_yaw = task.command[w, 2] - velocity[2]
+    e_att = wp.vec2(task.command[w, 3] - roll_pitch[0], task.command[w, 4] - roll_pitch[1])
+    e_h = task.command[w, 5] - wp.transform_get_translation(x_b)[2]
+    terms = wp.vec4(
+        wp.exp(-wp.dot(e_v, e_v) / params.sigma_linear_velocity),
+        wp.exp(-e_yaw * e_yaw / params.sigma_yaw_rate),
+        wp.exp(-wp.dot(e_att, e_att) / params.sigma_attitude),
+        wp.exp(-e_h * e_h / params.sigma_height),
+    )
+    total = float(0.0)
+    for i in range(4):
+        reward_terms[w, i] = params.weights[i] * terms[i]
+        total += params.weights[i] * terms[i]
+    reward[w] = total
+
+
+@wp.func
+def clearance(x: wp.transform, point: wp.vec3, radius: float):
+    """Height [m] above the ground plane of a sphere of ``radius`` centred at body-frame ``point``."""
+    return wp.transform_point(x, point)[2] - radius
+
+
+@wp.kernel
+def compute_constraints(
+    view: LeggedView,
+    task: LocomotionTask,
+    limits: LeggedLimits,
+    constraints: wp.array2d(dtype=float),
+):
+    """Constraint values (see the module docstring); then stores this step's leg velocities for the next."""
+    w = wp.tid()
+    k = int(0)
+    for j in range(NUM_LEG_JOINTS):
+        constraints[w, k + j] = wp.abs(leg_torque(view, task, limits, w, j)) - limits.nominal_torque[j]
+    k += NUM_LEG_JOINTS
+    for j in range(NUM_LEG_JOINTS):
+        constraints[w, k + j] = wp.abs(view.joint_qd[view.leg_qd[w, j]]) - limits.velocity_limit[j]
+    k += NUM_LEG_JOINTS
+    for j in range(NUM_LEG_JOINTS):
+        qd = view.joint_qd[view.leg_qd[w, j]]
+        constraints[w, k + j] = wp.abs(qd - task.leg_velocity_last[w, j]) / limits.control_dt - limits.acceleration_limit
+        task.leg_velocity_last[w, j] = qd
+    k += NUM_LEG_JOINTS
+    for j in range(NUM_LEG_JOINTS):
+        rate = wp.abs(task.actions[w, j] - task.last_actions[w, j]) / limits.control_dt
+        constraints[w, k + j] = rate - limits.action_rate_limit
+    k += NUM_LEG_JOINTS
+    # Base box: its lowest corner is |R_20| a + |R_21| b + |R_22| c below the base origin.
+    x_b = view.body_q[view.base_body[w]]
+    R = wp.quat_to_matrix(wp.transform_get_rotation(x_b))
+    e = limits.base_half_extents
+    lowest = wp.transform_get_translation(x_b)[2] - (wp.abs(R[2, 0]) * e[0] + wp.abs(R[2, 1]) * e[1] + wp.abs(R[2, 2]) * e[2])
+    constraints[w, k] = limits.collision_margin - lowest
+    for f in range(NUM_FEET):
+        x_s = view.body_q[view.shank_body[w, f]]
+        knee = clearance(x_s, wp.vec3(0.0), limits.knee_radius)
+        shank = clearance(x_s, limits.shank_end, limits.shank_radius)
+        constraints[w, k + 1 + f] = limits.collision_margin - wp.min(knee, shank)
+    k += 1 + NUM_FEET
+    for f in range(NUM_FEET):
+        air = task.touchdown_air_time[w, f]
+        constraints[w, k + f] = wp.where(air >= 0.0, limits.air_time_min - air, 0.0)
+
+
+@wp.kernel
+def compute_terminations(
+    view: LeggedView,
+    task: LocomotionTask,
+    limits: LeggedLimits,
+    reset: wp.array(dtype=int),
+    time_out: wp.array(dtype=int),
+):
+    """Advances the episode counter; a world resets after ``max_episode_steps`` (time-out) or a fall
+    (base tilt beyond ``base_tilt`` or base below ``base_min_height``)."""
+    w = wp.tid()
+    task.episode_step[w] = task.episode_step[w] + 1
+    x_b = view.body_q[view.base_body[w]]
+    z_axis = wp.quat_rotate(wp.transform_get_rotation(x_b), wp.vec3(0.0, 0.0, 1.0))
+    fallen = z_axis[2] < wp.cos(limits.base_tilt) or wp.transform_get_translation(x_b)[2] < limits.base_min_height
+    timed_out = task.episode_step[w] >= limits.max_episode_steps
+    reset[w] = wp.where(fallen or timed_out, 1, 0)
+    time_out[w] = wp.where(timed_out and not fallen, 1, 0)
+
+
+@wp.func
+def write_vec3(out: wp.array2d(dtype=float), w: int, k: int, v: wp.vec3):
+    for i in range(3):
+        out[w, k + i] = v[i]
+    return k + 3
+
+
+@wp.kernel
+def compute_observations(
+    view: LeggedView,
+    task: LocomotionTask,
+    params: LocomotionParams,
+    noise_scale: wp.array(dtype=float),
+    noise_enabled: int,
+    seed: int,
+    policy_obs: wp.array2d(dtype=float),
+    critic_obs: wp.array2d(dtype=float),
+):
+    """Fills ``critic_obs`` (noiseless) then ``policy_obs`` = its first 61 entries + U(-s, s) noise."""
+    w = wp.tid()
+    x_b = view.body_q[view.base_body[w]]
+    q_b = wp.transform_get_rotation(x_b)
+    qd_b = view.body_qd[view.base_body[w]]
+    k = int(0)
+    k = write_vec3(critic_obs, w, k, wp.quat_rotate_inv(q_b, wp.spatial_top(qd_b)))
+    k = write_vec3(critic_obs, w, k, wp.quat_rotate_inv(q_b, wp.spatial_bottom(qd_b)))
+    k = write_vec3(critic_obs, w, k, wp.quat_rotate_inv(q_b, wp.vec3(0.0, 0.0, -1.0)))
+    for i in range(NUM_COMMANDS):
+        critic_obs[w, k + i] = task.command[w, i]
+    k += NUM_COMMANDS
+    for j in range(NUM_LEG_JOINTS):
+        critic_obs[w, k + j] = view.joint_q[view.leg_q[w, j]] - params.leg_default[j]
+    k += NUM_LEG_JOINTS
+    for j in range(NUM_LEG_JOINTS):
+        critic_obs[w, k + j] = view.joint_qd[view.leg_qd[w, j]]
+    k += NUM_LEG_JOINTS
+    for j in range(NUM_LEG_JOINTS):
+        critic_obs[w, k + j] = task.actions[w, j]
+    k += NUM_LEG_JOINTS
+    for j in range(NUM_ARM_JOINTS):
+        critic_obs[w, k + j] = view.joint_q[view.arm_q[w, j]] - params.arm_default[j]
+    k += NUM_ARM_JOINTS
+    for j in range(NUM_ARM_JOINTS):
+        critic_obs[w, k + j] = view.joint_qd[view.arm_qd[w, j]]
+    k += NUM_ARM_JOINTS
+    # Privileged terms.
+    critic_obs[w, k] = wp.transform_get_translation(x_b)[2]
+    k += 1
+    for f in range(NUM_FEET):
+        critic_obs[w, k + f] = float(task.foot_contact[w, f])
+    k += NUM_FEET
+    critic_obs[w, k] = task.base_mass_offset[w]
+
+    rng = next_rng(seed, task.rng_counter, w)
+    for i in range(NUM_POLICY_OBS):
+        noise = float(0.0)
+        if noise_enabled != 0:
+            noise = wp.randf(rng, -1.0, 1.0) * noise_scale[i]
+        policy_obs[w, i] = critic_obs[w, i] + noise

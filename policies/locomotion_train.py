@@ -1,0 +1,97 @@
+"""Training configuration of the locomotion task (``dynpush train --task locomotion``, issue 8).
+
+Same learner as the push task (rsl_rl PPO + our CaT subclass, ``policies/runner.py``); only the environment,
+the network sizes and the ``p_max`` curricula differ. CaT (Chane-Sane et al., IROS 2024): hard constraints
+(collisions) terminate with probability 1 from the start; the others are soft and their ``p_max`` rises
+from 0.05 to 0.25 over the first half of the run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+from dynpush.kernels.locomotion import CONSTRAINT_GROUPS
+from dynpush.sim.config import ConfigError
+from dynpush.sim.locomotion_config import LocomotionEnvConfig
+
+from .train import PRESETS, NetworkConfig, PPOConfig, _from_dict
+
+
+def _cat_p_max() -> dict[str, tuple[float, float]]:
+    soft = (0.05, 0.25)  # CaT: soft constraints, p_max 0.05 -> 0.25
+    return {"leg_joint_torque": soft, "leg_joint_velocity": soft, "leg_joint_acceleration": soft,
+            "leg_action_rate": soft, "collision": (1.0, 1.0), "foot_air_time": soft}
+
+
+@dataclass
+class LocomotionTrainConfig:
+    preset: str = "cpu"
+    env: LocomotionEnvConfig = field(default_factory=LocomotionEnvConfig)
+    iterations: int = 1500  # ~37 M world-steps at 1024 worlds x 24 steps (flat-ground tracking converges in ~30 M)
+    num_steps_per_env: int = 24  # legged_gym
+    save_interval: int = 50
+    ppo: PPOConfig = field(default_factory=lambda: PPOConfig(entropy_coef=0.01))  # legged_gym: entropy 0.01
+    network: NetworkConfig = field(default_factory=lambda: NetworkConfig(actor_hidden=(512, 256, 128),
+                                                                          critic_hidden=(512, 256, 128)))  # legged_gym
+    p_max: dict[str, tuple[float, float]] = field(default_factory=_cat_p_max)
+    p_max_ramp_fraction: float = 0.5  # of the run over which p_max goes from initial to final
+
+    @staticmethod
+    def preset_config(name: str) -> LocomotionTrainConfig:
+        if name == "paper":  # the push task's GPU scale
+            return LocomotionTrainConfig(preset=name, env=LocomotionEnvConfig(num_envs=4096, device="cuda:0",
+                                                                             randomize_first_episode_length=True))
+        if name == "cpu":
+            return LocomotionTrainConfig(preset=name, env=LocomotionEnvConfig(num_envs=1024, randomize_first_episode_length=True))
+        raise ConfigError(f"preset must be one of {PRESETS}, got {name!r}")
+
+    def validate(self) -> LocomotionTrainConfig:
+        self.env.validate()
+        for name in ("iterations", "num_steps_per_env", "save_interval"):
+            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
+                raise ConfigError(f"{name} must be an integer >= 1, got {getattr(self, name)!r}")
+        groups = {name for name, _ in CONSTRAINT_GROUPS}
+        if set(self.p_max) != groups:
+            raise ConfigError(f"p_max must name exactly the constraint groups {sorted(groups)}, got {sorted(self.p_max)}")
+        for name, pair in self.p_max.items():
+            if len(pair) != 2 or not all(0.0 <= p <= 1.0 for p in pair):
+                raise ConfigError(f"p_max[{name!r}] must be (initial, final) within [0, 1], got {pair!r}")
+        if not 0.0 <= self.p_max_ramp_fraction <= 1.0:
+            raise ConfigError(f"p_max_ramp_fraction must lie in [0, 1], got {self.p_max_ramp_fraction!r}")
+        if self.ppo.schedule not in ("adaptive", "fixed"):
+            raise ConfigError(f"ppo.schedule must be 'adaptive' or 'fixed', got {self.ppo.schedule!r}")
+        return self
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @staticmethod
+    def from_dict(data: dict) -> LocomotionTrainConfig:
+        return _from_dict(LocomotionTrainConfig, data)
+
+    def make_env(self, env: LocomotionEnvConfig):
+        from dynpush.sim.locomotion_env import LocomotionEnv
+
+        return LocomotionEnv(env)
+
+    def runner_cfg(self) -> dict:
+        """The rsl_rl runner configuration."""
+        mlp = {"class_name": "MLPModel", "activation": "elu", "obs_normalization": True}
+        return {
+            "num_steps_per_env": self.num_steps_per_env,
+            "save_interval": self.save_interval,
+            "obs_groups": {"actor": ["policy"], "critic": ["critic"]},
+            "algorithm": dataclasses.asdict(self.ppo),
+            "actor": {**mlp, "hidden_dims": list(self.network.actor_hidden),
+                      "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": self.network.init_noise_std}},
+            "critic": {**mlp, "hidden_dims": list(self.network.critic_hidden)},
+            "schedule": {
+                "scale_with_run_length": False,
+                "reach": None,
+                "constraints": {"p_max": {name: tuple(pair) for name, pair in self.p_max.items()},
+                                "ramp_iterations": int(self.p_max_ramp_fraction * self.iterations)},
+            },
+            "logger": "tensorboard",
+            "check_for_nan": True,
+        }

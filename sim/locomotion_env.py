@@ -1,0 +1,321 @@
+"""LocomotionEnv: N legged robots tracking 6D base commands under random arm motions, as an rsl_rl ``VecEnv``.
+
+Physics is MuJoCo-Warp through Newton (``SolverMuJoCo`` with MuJoCo's own contacts): XPBD's joint drives
+are not the PD law and its legged robot sinks (README, "Solver cross-check"). One control step (50 Hz)
+is one captured Warp graph: actions -> leg and arm joint targets, ``substeps`` solver steps, feet,
+rewards, constraints, terminations, auto-reset, scheduled events (commands, arm targets, pushes) and
+observations. Kernels and layouts: :mod:`dynpush.kernels.locomotion`.
+"""
+
+from __future__ import annotations
+
+import newton
+import numpy as np
+import torch
+import warp as wp
+from rsl_rl.env import VecEnv
+from tensordict import TensorDict
+
+from dynpush.kernels import locomotion as k
+from dynpush.sim.push_env import _articulation_mask
+
+from .legged_scene import build_legged_scene
+from .locomotion_config import LocomotionEnvConfig
+
+wp.config.enable_backward = False
+
+CONSTRAINT_GROUPS = k.CONSTRAINT_GROUPS
+REWARD_TERMS = k.REWARD_TERMS
+COMMAND_NAMES = ("vx", "vy", "yaw_rate", "roll", "pitch", "height")
+
+
+class LocomotionEnv(VecEnv):
+    """Command tracking with the legged robot; see the module docstring."""
+
+    def __init__(self, cfg: LocomotionEnvConfig):
+        self.cfg = cfg.validate()
+        self.num_envs = cfg.num_envs
+        self.num_actions = k.NUM_LEG_JOINTS
+        self.max_episode_length = cfg.max_episode_steps
+        self.device = cfg.device
+        self.wp_device = wp.get_device(cfg.device)
+        self.constraint_groups = list(CONSTRAINT_GROUPS)
+        with wp.ScopedDevice(self.wp_device):
+            self.scene = build_legged_scene(cfg.num_envs, cfg.device)
+            model = self.scene.model
+            # MuJoCo's contacts: feet, knees and base against the ground plane only (no self-collisions).
+            m = cfg.mujoco
+            self.solver = newton.solvers.SolverMuJoCo(model, use_mujoco_contacts=True, solver=m.solver, iterations=m.iterations,
+                                                      ls_iterations=m.ls_iterations, nconmax=m.nconmax, njmax=m.njmax)
+            # The iteration cap is deliberate (MuJoCoConfig); buffer overflows still warn.
+            import mujoco_warp
+
+            self.solver.mjw_model.opt.warn_overflow &= ~(mujoco_warp.OverflowType.ITERATIONS | mujoco_warp.OverflowType.LS_ITERATIONS)
+            self.state_0, self.state_1 = model.state(), model.state()
+            self.control = model.control()
+            self._make_buffers()
+            self._make_params()
+            self._randomize_base_masses()
+            self.reset(randomize_episode_step=cfg.randomize_first_episode_length)
+            with wp.ScopedCapture() as capture:
+                self._step_kernels()
+            self._graph = capture.graph
+
+    # ------------------------------------------------------------------ construction
+    def _make_buffers(self) -> None:
+        n, scene = self.num_envs, self.scene
+        i32 = lambda a: wp.array(np.asarray(a, dtype=np.int32), dtype=int)  # noqa: E731
+        i32_2d = lambda a: wp.array2d(np.asarray(a, dtype=np.int32), dtype=int)  # noqa: E731
+        task = k.LocomotionTask()
+        for name, width in (("command", k.NUM_COMMANDS), ("actions", k.NUM_LEG_JOINTS), ("last_actions", k.NUM_LEG_JOINTS),
+                            ("leg_target", k.NUM_LEG_JOINTS), ("leg_velocity_last", k.NUM_LEG_JOINTS),
+                            ("arm_target", k.NUM_ARM_JOINTS + 1), ("foot_air_time", k.NUM_FEET),
+                            ("touchdown_air_time", k.NUM_FEET)):
+            setattr(task, name, wp.zeros((n, width), dtype=float))
+        task.foot_contact = wp.zeros((n, k.NUM_FEET), dtype=int)
+        task.base_mass_offset = wp.zeros(n, dtype=float)
+        for name in ("episode_step", "next_command_step", "next_arm_step", "next_push_step", "rng_counter"):
+            setattr(task, name, wp.zeros(n, dtype=int))
+        self.task = task
+
+        view = k.LeggedView()
+        view.body_q, view.body_qd = self.state_0.body_q, self.state_0.body_qd
+        view.joint_q, view.joint_qd = self.state_0.joint_q, self.state_0.joint_qd
+        view.base_body = i32(scene.base_body)
+        view.base_q_start = i32(scene.base_q_start)
+        view.base_qd_start = i32(scene.base_qd_start)
+        view.robot_qd_count = scene.robot_qd_count
+        view.leg_q, view.leg_qd = i32_2d(scene.leg_q), i32_2d(scene.leg_qd)
+        view.arm_q, view.arm_qd = i32_2d(scene.arm_q), i32_2d(scene.arm_qd)
+        view.shank_body = i32_2d(scene.shank_body)
+        self.view = view
+
+        self.raw_actions = wp.zeros((n, k.NUM_LEG_JOINTS), dtype=float)
+        self.policy_obs = wp.zeros((n, k.NUM_POLICY_OBS), dtype=float)
+        self.critic_obs = wp.zeros((n, k.NUM_CRITIC_OBS), dtype=float)
+        self.reward = wp.zeros(n, dtype=float)
+        self.reward_terms = wp.zeros((n, len(REWARD_TERMS)), dtype=float)
+        self.constraints = wp.zeros((n, k.NUM_CONSTRAINTS), dtype=float)
+        self.reset_flags = wp.zeros(n, dtype=int)
+        self.time_out = wp.zeros(n, dtype=int)
+        self.articulation_mask = wp.zeros(self.scene.model.articulation_count, dtype=bool)
+
+        t = wp.to_torch
+        self.actions_t = t(self.raw_actions)
+        self.policy_obs_t, self.critic_obs_t = t(self.policy_obs), t(self.critic_obs)
+        self.reward_t, self.reward_terms_t = t(self.reward), t(self.reward_terms)
+        self.constraints_t = t(self.constraints)
+        self.reset_t, self.time_out_t = t(self.reset_flags), t(self.time_out)
+        self.episode_length_buf = t(task.episode_step)
+        self._group_sizes = [size for _, size in CONSTRAINT_GROUPS]
+        self._violated_steps = torch.zeros(n, len(CONSTRAINT_GROUPS), device=self.constraints_t.device)
+        self._steps_in_episode = torch.zeros(n, device=self.constraints_t.device)
+
+    def _make_params(self) -> None:
+        cfg, robot = self.cfg, self.scene.robot
+        f32 = lambda a: wp.array(np.asarray(a, dtype=np.float32), dtype=float)  # noqa: E731
+        steps = lambda pair: wp.vec2(pair[0] / cfg.control_dt, pair[1] / cfg.control_dt)  # noqa: E731
+        rnd = cfg.randomization
+        p = k.LocomotionParams()
+        p.leg_default = f32(robot.leg_default)
+        p.arm_default, p.arm_lower, p.arm_upper = f32(robot.arm_default), f32(robot.arm_lower), f32(robot.arm_upper)
+        p.action_scale, p.clip = cfg.action_scale, cfg.action_clip
+        p.command_lower, p.command_upper = f32(cfg.commands.lower), f32(cfg.commands.upper)
+        p.standing_probability = cfg.commands.standing_probability
+        p.command_interval = steps(cfg.commands.resample_interval_s)
+        p.arm_amplitude = rnd.arm_amplitude
+        p.arm_interval = steps(rnd.arm_interval_s)
+        p.push_interval = steps(rnd.push_interval_s)
+        p.push_velocity = rnd.push_velocity
+        p.start_height = cfg.start_height
+        p.leg_position_noise = rnd.leg_position_noise
+        self.params = p
+
+        c = cfg.constraints
+        lim = k.LeggedLimits()
+        lim.stiffness, lim.damping = f32(robot.leg_stiffness), f32(robot.leg_damping)
+        lim.effort_limit = f32(robot.leg_effort_limit)
+        lim.nominal_torque = f32(np.tile(c.leg_nominal_torque, 4))
+        lim.velocity_limit = f32(c.velocity_fraction * robot.leg_velocity_limit)
+        lim.acceleration_limit = c.acceleration_limit
+        lim.action_rate_limit = c.action_rate_limit
+        lim.air_time_min = c.air_time_min
+        lim.control_dt = cfg.control_dt
+        lim.foot_offset = wp.vec3(*robot.foot_offset)
+        lim.foot_radius = robot.foot_radius
+        lim.contact_margin = c.contact_margin
+        lim.knee_radius = robot.knee_radius
+        lim.shank_end = wp.vec3(*robot.shank_end)
+        lim.shank_radius = robot.shank_radius
+        lim.base_half_extents = wp.vec3(*robot.base_half_extents)
+        lim.collision_margin = c.collision_margin
+        lim.base_tilt = cfg.base_tilt
+        lim.base_min_height = cfg.base_min_height
+        lim.max_episode_steps = cfg.max_episode_steps
+        self.limits = lim
+
+        r = cfg.rewards
+        rp = k.LocomotionRewardParams()
+        rp.sigma_linear_velocity, rp.sigma_yaw_rate = r.sigma_linear_velocity, r.sigma_yaw_rate
+        rp.sigma_attitude, rp.sigma_height = r.sigma_attitude, r.sigma_height
+        rp.weights = f32(r.weights)
+        self.reward_params = rp
+
+        scales = []
+        for name, size in k.POLICY_TERMS:
+            scales += [cfg.noise.half_width(name)] * size
+        self.noise_scale = f32(scales)
+
+    # ------------------------------------------------------------------ the step
+    def _launch(self, kernel, inputs) -> None:
+        wp.launch(kernel, dim=self.num_envs, inputs=inputs, device=self.wp_device)
+
+    def _step_kernels(self) -> None:
+        cfg = self.cfg
+        self._launch(k.process_actions, [self.raw_actions, self.params, self.view, self.task, self.control.joint_target_q])
+        dt = cfg.control_dt / cfg.substeps
+        for sub in range(cfg.substeps):
+            state_in, state_out = (self.state_0, self.state_1) if sub % 2 == 0 else (self.state_1, self.state_0)
+            self.solver.step(state_in, state_out, self.control, None, dt)
+        if cfg.substeps % 2:  # the view reads state_0
+            for name in ("body_q", "body_qd", "joint_q", "joint_qd"):
+                getattr(self.state_0, name).assign(getattr(self.state_1, name))
+        self._launch(k.update_feet, [self.view, self.limits, self.task])
+        self._launch(k.compute_rewards, [self.view, self.task, self.reward_params, self.reward, self.reward_terms])
+        self._launch(k.compute_constraints, [self.view, self.task, self.limits, self.constraints])
+        self._launch(k.compute_terminations, [self.view, self.task, self.limits, self.reset_flags, self.time_out])
+        self._start_flagged()
+        self._launch(k.apply_events, [cfg.seed, self.params, self.view, self.task])
+        self._observe()
+
+    def _start_flagged(self) -> None:
+        """New episodes in the worlds with ``reset_flags != 0`` (inside the captured step)."""
+        model = self.scene.model
+        self._launch(k.start_episodes, [self.reset_flags, self.cfg.seed, self.params, self.view, self.task])
+        wp.launch(_articulation_mask, dim=model.articulation_count,
+                  inputs=[self.reset_flags, model.articulation_world, self.articulation_mask], device=self.wp_device)
+        newton.eval_fk(model, self.state_0.joint_q, self.state_0.joint_qd, self.state_0, mask=self.articulation_mask)
+
+    def _randomize_base_masses(self) -> None:
+        """Draws every world's base mass offset once (as legged_gym): updating MuJoCo's model costs as much as
+        the physics of a step (72 ms at 512 worlds), too much for every reset."""
+        low, high = self.cfg.randomization.base_mass_offset
+        offsets = np.random.default_rng(self.cfg.seed).uniform(low, high, self.num_envs)
+        model, bodies = self.scene.model, self.scene.base_body
+        mass, inv_mass = model.body_mass.numpy(), model.body_inv_mass.numpy()
+        mass[bodies] = self.scene.robot.base_mass + offsets
+        inv_mass[bodies] = 1.0 / mass[bodies]
+        model.body_mass.assign(mass)
+        model.body_inv_mass.assign(inv_mass)
+        self.task.base_mass_offset.assign(offsets.astype(np.float32))
+        self.solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
+
+    def _observe(self) -> None:
+        self._launch(k.compute_observations, [self.view, self.task, self.params, self.noise_scale,
+                                              int(self.cfg.noise.enabled), self.cfg.seed, self.policy_obs, self.critic_obs])
+
+    # ------------------------------------------------------------------ VecEnv
+    def reset(self, randomize_episode_step: bool = False) -> TensorDict:
+        """Resets every world (outside the graph); ``randomize_episode_step`` spreads the first episodes' ends."""
+        with wp.ScopedDevice(self.wp_device):
+            self.reset_flags.fill_(1)
+            self._start_flagged()
+            if randomize_episode_step:
+                rng = np.random.default_rng(self.cfg.seed)
+                self.task.episode_step.assign(rng.integers(0, self.max_episode_length, self.num_envs, dtype=np.int32))
+            self.control.joint_target_q.assign(self.state_0.joint_q)
+            self._observe()
+        self._violated_steps.zero_()
+        self._steps_in_episode.zero_()
+        return self.get_observations()
+
+    def get_observations(self) -> TensorDict:
+        """Copies of the observation buffers (the next step overwrites the zero-copy views in place)."""
+        return TensorDict({"policy": self.policy_obs_t.clone(), "critic": self.critic_obs_t.clone()},
+                          batch_size=[self.num_envs])
+
+    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
+        self.actions_t.copy_(actions)
+        with wp.ScopedDevice(self.wp_device):
+            wp.capture_launch(self._graph)
+        extras = {"time_outs": self.time_out_t.to(torch.bool), "constraints": self.constraints_t, "log": self._episode_log()}
+        return self.get_observations(), self.reward_t.clone(), self.reset_t.to(torch.long), extras
+
+    def set_commands(self, commands: np.ndarray, hold: bool = True) -> TensorDict:
+        """Gives every world the 6D command ``commands`` (num_envs, 6), now; with ``hold`` it is not resampled
+        for the rest of the episode (evaluation). Returns the observations."""
+        commands = np.asarray(commands, dtype=np.float32)
+        if commands.shape != (self.num_envs, k.NUM_COMMANDS) or not np.all(np.isfinite(commands)):
+            raise ValueError(f"commands must be finite with shape ({self.num_envs}, 6), got {commands.shape}")
+        with wp.ScopedDevice(self.wp_device):
+            self.task.command.assign(commands)
+            if hold:
+                self.task.next_command_step.fill_(np.iinfo(np.int32).max)
+            self._observe()
+        return self.get_observations()
+
+    def set_reward_weight(self, name: str, value: float) -> None:
+        """Changes one reward weight (``REWARD_TERMS``)."""
+        if name not in REWARD_TERMS:
+            raise KeyError(f"reward weight name must be one of {REWARD_TERMS}, got {name!r}")
+        weights = self.reward_params.weights.numpy()
+        weights[REWARD_TERMS.index(name)] = value
+        self.reward_params.weights.assign(weights)
+
+    @property
+    def violated_groups_t(self) -> torch.Tensor:
+        """(num_envs, constraint groups) bool: a column of the group is violated this step."""
+        return torch.stack([g.any(dim=1) for g in torch.split(self.constraints_t > 0.0, self._group_sizes, dim=1)], dim=1)
+
+    def _episode_log(self) -> dict[str, float | torch.Tensor]:
+        """Per ended episode: fell (not timed out) and the share of steps with each constraint group violated;
+        per step: the mean of each reward term."""
+        log: dict[str, float | torch.Tensor] = {}
+        self._violated_steps += self.violated_groups_t
+        self._steps_in_episode += 1.0
+        ended = self.reset_t != 0
+        if bool(ended.any()):
+            fraction = self._violated_steps[ended] / self._steps_in_episode[ended, None]
+            for i, (name, _) in enumerate(CONSTRAINT_GROUPS):
+                log[f"/episode/violated/{name}"] = fraction[:, i]
+            log["/episode/fell"] = (self.time_out_t[ended] == 0).float()
+            self._violated_steps[ended] = 0.0
+            self._steps_in_episode[ended] = 0.0
+        for i, name in enumerate(REWARD_TERMS):
+            log[f"/reward/{name}"] = float(self.reward_terms_t[:, i].mean())
+        return log
+
+    # ------------------------------------------------------------------ checkpointing
+    def _state_arrays(self) -> dict[str, wp.array]:
+        arrays = {f"task.{name}": getattr(self.task, name) for name in k.LocomotionTask.vars}
+        for name in ("body_q", "body_qd", "joint_q", "joint_qd"):
+            arrays[f"state.{name}"] = getattr(self.state_0, name)
+        arrays["control.joint_target_q"] = self.control.joint_target_q
+        arrays["model.body_mass"] = self.scene.model.body_mass
+        arrays["model.body_inv_mass"] = self.scene.model.body_inv_mass
+        arrays["policy_obs"], arrays["critic_obs"] = self.policy_obs, self.critic_obs
+        return arrays
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """Everything needed to continue the simulation exactly (numpy copies)."""
+        return {name: array.numpy().copy() for name, array in self._state_arrays().items()}
+
+    def state_mismatch(self, state: dict[str, np.ndarray]) -> str | None:
+        """Why :meth:`load_state_dict` cannot restore ``state`` here, or None."""
+        arrays = self._state_arrays()
+        missing = set(arrays) - set(state)
+        if missing:
+            return f"environment state lacks {sorted(missing)}"
+        for name, array in arrays.items():
+            if tuple(state[name].shape) != tuple(array.shape):
+                return f"environment state {name!r} has shape {state[name].shape}, expected {array.shape} (same num_envs required)"
+        return None
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        mismatch = self.state_mismatch(state)
+        if mismatch is not None:
+            raise ValueError(mismatch)
+        with wp.ScopedDevice(self.wp_device):
+            for name, array in self._state_arrays().items():
+                array.assign(state[name])
+            self.solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)

@@ -28,6 +28,18 @@ def rotation_angle(q_a: wp.quat, q_b: wp.quat):
 
 
 @wp.func
+def fork_rng(draw: int):
+    """A random stream for a ``wp.func`` that draws, from ``draw = wp.randi(rng)`` taken by the caller.
+
+    Warp passes the uint32 state to a ``wp.func`` by value: draws inside the function do not advance the
+    caller's state, so the caller's next draw would repeat the function's first one. Builtins (``wp.randf``,
+    ``wp.randi``) called in the caller's own scope do advance it. The offset matters: ``wp.rand_init(draw)``
+    alone is the caller's own next state (Warp's PCG), i.e. the caller's stream shifted by one draw.
+    """
+    return wp.rand_init(draw, 1)
+
+
+@wp.func
 def next_rng(seed: int, rng_counter: wp.array(dtype=int), w: int):
     """A fresh random stream for world ``w``: counter-based, so runs are reproducible per seed."""
     n = rng_counter.shape[0]

@@ -28,7 +28,7 @@ import warp as wp
 
 from dynpush.runtime.config import LOCOMOTION_TERMS
 
-from .frames import heading_roll_pitch, heading_yaw, next_rng, yaw_quat
+from .frames import fork_rng, heading_roll_pitch, heading_yaw, next_rng, yaw_quat
 
 wp.set_module_options({"enable_backward": False})
 
@@ -50,6 +50,7 @@ CONSTRAINT_GROUPS = (
 )
 NUM_CONSTRAINTS = sum(size for _, size in CONSTRAINT_GROUPS)
 REWARD_TERMS = ("linear_velocity", "yaw_rate", "attitude", "height")
+vec12 = wp.types.vector(length=NUM_LEG_JOINTS, dtype=float)
 
 
 @wp.struct
@@ -161,6 +162,22 @@ def leg_torque(view: LeggedView, task: LocomotionTask, limits: LeggedLimits, w: 
 
 
 @wp.func
+def leg_torque_excess(view: LeggedView, task: LocomotionTask, limits: LeggedLimits, w: int, j: int):
+    """Leg-torque constraint value ``|tau_j| - tau_nominal_j`` [N m] (violated where > 0)."""
+    return wp.abs(leg_torque(view, task, limits, w, j)) - limits.nominal_torque[j]
+
+
+@wp.kernel
+def write_leg_torque_constraints(view: LeggedView, task: LocomotionTask, limits: LeggedLimits,
+                                 constraints: wp.array2d(dtype=float), first_column: int):
+    """The 12 leg-torque constraint values into ``constraints[:, first_column:first_column + 12]`` (the legged
+    push task's leg-torque columns)."""
+    w = wp.tid()
+    for j in range(NUM_LEG_JOINTS):
+        constraints[w, first_column + j] = leg_torque_excess(view, task, limits, w, j)
+
+
+@wp.func
 def heading_velocities(q_b: wp.quat, qd_b: wp.spatial_vector):
     """(vx_h, vy_h, yaw rate): base velocity in the heading frame [m/s] and angular velocity about world z [rad/s]."""
     v_h = wp.quat_rotate_inv(yaw_quat(heading_yaw(q_b)), wp.spatial_top(qd_b))
@@ -169,6 +186,7 @@ def heading_velocities(q_b: wp.quat, qd_b: wp.spatial_vector):
 
 @wp.func
 def sample_command(rng: wp.uint32, params: LocomotionParams, task: LocomotionTask, w: int):
+    """A new command for world ``w``; ``rng``: a forked stream (``frames.fork_rng``)."""
     standing = wp.randf(rng) < params.standing_probability
     for i in range(NUM_COMMANDS):
         value = wp.randf(rng, params.command_lower[i], params.command_upper[i])
@@ -179,6 +197,7 @@ def sample_command(rng: wp.uint32, params: LocomotionParams, task: LocomotionTas
 
 @wp.func
 def sample_arm_target(rng: wp.uint32, params: LocomotionParams, task: LocomotionTask, w: int):
+    """A new arm target for world ``w``; ``rng``: a forked stream (``frames.fork_rng``)."""
     for j in range(NUM_ARM_JOINTS):
         target = params.arm_default[j] + wp.randf(rng, -params.arm_amplitude, params.arm_amplitude)
         task.arm_target[w, j] = wp.clamp(target, params.arm_lower[j], params.arm_upper[j])
@@ -186,8 +205,25 @@ def sample_arm_target(rng: wp.uint32, params: LocomotionParams, task: Locomotion
 
 
 @wp.func
-def steps_in(rng: wp.uint32, interval: wp.vec2):
-    return int(wp.randf(rng, interval[0], interval[1]))
+def steps_in(u: float, interval: wp.vec2):
+    """``u`` in [0, 1) (a ``wp.randf(rng)`` of the caller) mapped onto a whole number of steps in ``interval``."""
+    return int(interval[0] + u * (interval[1] - interval[0]))
+
+
+@wp.func
+def reset_legs(params: LocomotionParams, view: LeggedView, task: LocomotionTask, w: int, noise: vec12):
+    """Legs of world ``w`` at their default plus ``noise`` [rad], targets there, no action history, feet down."""
+    for j in range(NUM_LEG_JOINTS):
+        q = params.leg_default[j] + noise[j]
+        view.joint_q[view.leg_q[w, j]] = q
+        task.leg_target[w, j] = q
+        task.leg_velocity_last[w, j] = 0.0
+        task.actions[w, j] = 0.0
+        task.last_actions[w, j] = 0.0
+    for f in range(NUM_FEET):
+        task.foot_contact[w, f] = 1
+        task.foot_air_time[w, f] = 0.0
+        task.touchdown_air_time[w, f] = -1.0
 
 
 @wp.kernel
@@ -214,25 +250,26 @@ def start_episodes(
         view.joint_q[q0 + i] = pose[i]
     for i in range(view.robot_qd_count):
         view.joint_qd[view.base_qd_start[w] + i] = 0.0
+    noise = vec12()
     for j in range(NUM_LEG_JOINTS):
-        q = params.leg_default[j] + wp.randf(rng, -params.leg_position_noise, params.leg_position_noise)
-        view.joint_q[view.leg_q[w, j]] = q
-        task.leg_target[w, j] = q
-        task.leg_velocity_last[w, j] = 0.0
-        task.actions[w, j] = 0.0
-        task.last_actions[w, j] = 0.0
+        noise[j] = wp.randf(rng, -params.leg_position_noise, params.leg_position_noise)
+    reset_legs(params, view, task, w, noise)
     for j in range(NUM_ARM_JOINTS + 1):
         view.joint_q[view.arm_q[w, j]] = params.arm_default[j]
         task.arm_target[w, j] = params.arm_default[j]
-    for f in range(NUM_FEET):
-        task.foot_contact[w, f] = 1
-        task.foot_air_time[w, f] = 0.0
-        task.touchdown_air_time[w, f] = -1.0
-    sample_command(rng, params, task, w)
+    sample_command(fork_rng(wp.randi(rng)), params, task, w)
     task.episode_step[w] = 0
-    task.next_command_step[w] = steps_in(rng, params.command_interval)
-    task.next_arm_step[w] = steps_in(rng, params.arm_interval)
-    task.next_push_step[w] = steps_in(rng, params.push_interval)
+    task.next_command_step[w] = steps_in(wp.randf(rng), params.command_interval)
+    task.next_arm_step[w] = steps_in(wp.randf(rng), params.arm_interval)
+    task.next_push_step[w] = steps_in(wp.randf(rng), params.push_interval)
+
+
+@wp.kernel
+def start_legs(reset: wp.array(dtype=int), params: LocomotionParams, view: LeggedView, task: LocomotionTask):
+    """Legs of every world with ``reset[w] != 0`` at their default (the legged push task's episode start)."""
+    w = wp.tid()
+    if reset[w] != 0:
+        reset_legs(params, view, task, w, vec12())
 
 
 @wp.kernel
@@ -243,30 +280,30 @@ def apply_events(seed: int, params: LocomotionParams, view: LeggedView, task: Lo
     step = task.episode_step[w]
     if step >= task.next_command_step[w]:
         rng = next_rng(seed, task.rng_counter, w)
-        sample_command(rng, params, task, w)
-        task.next_command_step[w] = step + steps_in(rng, params.command_interval)
+        sample_command(fork_rng(wp.randi(rng)), params, task, w)
+        task.next_command_step[w] = step + steps_in(wp.randf(rng), params.command_interval)
     if step >= task.next_arm_step[w]:
         rng = next_rng(seed, task.rng_counter, w)
-        sample_arm_target(rng, params, task, w)
-        task.next_arm_step[w] = step + steps_in(rng, params.arm_interval)
+        sample_arm_target(fork_rng(wp.randi(rng)), params, task, w)
+        task.next_arm_step[w] = step + steps_in(wp.randf(rng), params.arm_interval)
     if step >= task.next_push_step[w]:
         rng = next_rng(seed, task.rng_counter, w)
         d0 = view.base_qd_start[w]
         view.joint_qd[d0 + 0] = view.joint_qd[d0 + 0] + wp.randf(rng, -params.push_velocity, params.push_velocity)
         view.joint_qd[d0 + 1] = view.joint_qd[d0 + 1] + wp.randf(rng, -params.push_velocity, params.push_velocity)
-        task.next_push_step[w] = step + steps_in(rng, params.push_interval)
+        task.next_push_step[w] = step + steps_in(wp.randf(rng), params.push_interval)
 
 
 @wp.kernel
-def process_actions(
+def process_leg_actions(
     raw_actions: wp.array2d(dtype=float),
     params: LocomotionParams,
     view: LeggedView,
     task: LocomotionTask,
     joint_target_q: wp.array(dtype=float),
 ):
-    """Shifts the action history, clips the actions (non-finite counts as zero) and writes the leg and
-    arm joint targets."""
+    """Shifts the action history, clips the actions (non-finite counts as zero) and writes the leg joint
+    targets."""
     w = wp.tid()
     for j in range(NUM_LEG_JOINTS):
         a = raw_actions[w, j]
@@ -277,6 +314,12 @@ def process_actions(
         target = params.leg_default[j] + params.action_scale * task.actions[w, j]
         task.leg_target[w, j] = target
         joint_target_q[view.leg_q[w, j]] = target
+
+
+@wp.kernel
+def write_arm_targets(view: LeggedView, task: LocomotionTask, joint_target_q: wp.array(dtype=float)):
+    """The random arm motion's targets (all 6 arm joints) into the joint drives."""
+    w = wp.tid()
     for j in range(NUM_ARM_JOINTS + 1):
         joint_target_q[view.arm_q[w, j]] = task.arm_target[w, j]
 
@@ -347,7 +390,7 @@ def compute_constraints(
     w = wp.tid()
     k = int(0)
     for j in range(NUM_LEG_JOINTS):
-        constraints[w, k + j] = wp.abs(leg_torque(view, task, limits, w, j)) - limits.nominal_torque[j]
+        constraints[w, k + j] = leg_torque_excess(view, task, limits, w, j)
     k += NUM_LEG_JOINTS
     for j in range(NUM_LEG_JOINTS):
         constraints[w, k + j] = wp.abs(view.joint_qd[view.leg_qd[w, j]]) - limits.velocity_limit[j]

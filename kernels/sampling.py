@@ -9,7 +9,7 @@ joints uniform around the default; reach target uniform on the object's vertical
 
 import warp as wp
 
-from .frames import next_rng, yaw_quat
+from .frames import fork_rng, next_rng, yaw_quat
 from .views import NUM_ACTIONS, NUM_ARM_JOINTS, NUM_BASE_COMMANDS, CONTACT_COLUMNS, PushTask, RobotView
 
 wp.set_module_options({"enable_backward": False})
@@ -45,16 +45,18 @@ class SamplingParams:
 
 
 @wp.func
-def uniform(rng: wp.uint32, r: wp.vec2):
-    return wp.randf(rng, r[0], r[1])
+def uniform(u: float, r: wp.vec2):
+    """``u`` in [0, 1) (a ``wp.randf(rng)`` of the caller) mapped onto ``[r[0], r[1])``."""
+    return r[0] + u * (r[1] - r[0])
 
 
 @wp.func
 def polar_pose(rng: wp.uint32, radius: wp.vec2, bearing: wp.vec2, yaw: wp.vec2):
-    """(x, y, yaw): position uniform by area in the annulus sector, yaw uniform."""
+    """(x, y, yaw): position uniform by area in the annulus sector, yaw uniform. ``rng``: a forked stream
+    (``frames.fork_rng``)."""
     r = wp.sqrt(wp.randf(rng, radius[0] * radius[0], radius[1] * radius[1]))
-    a = uniform(rng, bearing)
-    return wp.vec3(r * wp.cos(a), r * wp.sin(a), uniform(rng, yaw))
+    a = uniform(wp.randf(rng), bearing)
+    return wp.vec3(r * wp.cos(a), r * wp.sin(a), uniform(wp.randf(rng), yaw))
 
 
 @wp.func
@@ -75,7 +77,8 @@ def cylinder_inertia(m: float, d: wp.vec3):
 
 @wp.func
 def surface_point(rng: wp.uint32, shape: int, d: wp.vec3):
-    """A point uniform (by area) on the vertical surfaces of the object, object frame [m]."""
+    """A point uniform (by area) on the vertical surfaces of the object, object frame [m]. ``rng``: a forked
+    stream (``frames.fork_rng``)."""
     z = wp.randf(rng, -0.5 * d[2], 0.5 * d[2])
     if shape == SHAPE_CYLINDER:
         angle = wp.randf(rng, -wp.pi, wp.pi)
@@ -143,29 +146,29 @@ def sample_episodes(
         d = wp.vec3(d[0], d[0], d[2])
     spec.shape[w] = shape
     spec.dims[w] = d
-    spec.mass[w] = uniform(rng, params.mass)
+    spec.mass[w] = uniform(wp.randf(rng), params.mass)
     spec.com_o[w] = wp.vec3(
         wp.randf(rng, params.com_fraction_lo[0], params.com_fraction_hi[0]) * d[0],
         wp.randf(rng, params.com_fraction_lo[1], params.com_fraction_hi[1]) * d[1],
         wp.randf(rng, params.com_fraction_lo[2], params.com_fraction_hi[2]) * d[2],
     )
-    spec.friction[w] = uniform(rng, params.friction)
-    object_yaw = uniform(rng, params.object_yaw)
+    spec.friction[w] = uniform(wp.randf(rng), params.friction)
+    object_yaw = uniform(wp.randf(rng), params.object_yaw)
     spec.object_yaw[w] = object_yaw
     spec.reach_target_o[w] = wp.vec3(0.0)
     if params.surface_target != 0:
-        spec.reach_target_o[w] = surface_point(rng, shape, d)
+        spec.reach_target_o[w] = surface_point(fork_rng(wp.randi(rng)), shape, d)
     # Goal and robot uniform by area in their annuli.
-    goal = polar_pose(rng, params.goal_radius, params.goal_bearing, params.goal_yaw)
+    goal = polar_pose(fork_rng(wp.randi(rng)), params.goal_radius, params.goal_bearing, params.goal_yaw)
     difficulty = goal_difficulty[0]
     yaw_change = wp.atan2(wp.sin(goal[2] - object_yaw), wp.cos(goal[2] - object_yaw))
     goal_yaw = wp.where(difficulty < 1.0, object_yaw + difficulty * yaw_change, goal[2])
     spec.goal[w] = wp.vec3(goal[0], goal[1], goal_yaw)
-    spec.base[w] = polar_pose(rng, params.robot_radius, params.robot_bearing, params.base_yaw)
+    spec.base[w] = polar_pose(fork_rng(wp.randi(rng)), params.robot_radius, params.robot_bearing, params.base_yaw)
     for j in range(NUM_ARM_JOINTS):
         spec.arm_q[w, j] = task.arm_default[j] + wp.randf(rng, -params.arm_joint_noise, params.arm_joint_noise)
-    spec.base_mass_offset[w] = uniform(rng, params.base_mass_offset)
-    spec.first_push_step[w] = int(uniform(rng, params.push_interval_steps))
+    spec.base_mass_offset[w] = uniform(wp.randf(rng), params.base_mass_offset)
+    spec.first_push_step[w] = int(uniform(wp.randf(rng), params.push_interval_steps))
 
 
 @wp.func
@@ -324,4 +327,4 @@ def apply_pushes(
     )
     qd = body_qd[b]
     body_qd[b] = wp.spatial_vector(wp.spatial_top(qd) + dv, wp.spatial_bottom(qd))
-    task.next_push_step[w] = task.episode_step[w] + int(uniform(rng, params.push_interval_steps))
+    task.next_push_step[w] = task.episode_step[w] + int(uniform(wp.randf(rng), params.push_interval_steps))

@@ -21,8 +21,15 @@ Table I ablations are separate trainings evaluated the same way, e.g.
 
 
 def _export(args: argparse.Namespace) -> int:
-    from .export import OnnxPolicy, export_policy
+    from .export import OnnxPolicy, export_policy, load_run_config
+    from .locomotion_train import LocomotionTrainConfig
 
+    if isinstance(load_run_config(Path(args.run)), LocomotionTrainConfig):
+        from .locomotion_export import export_locomotion
+
+        path = export_locomotion(Path(args.run), args.checkpoint, Path(args.out) if args.out else None)
+        print(f"{path}: obs [1, 61] -> leg actions [1, 12] (runtime section: locomotion.mode onnx)")
+        return 0
     path = export_policy(Path(args.run), args.checkpoint, Path(args.out) if args.out else None)
     contract = OnnxPolicy(path).contract
     print(f"{path}: obs [1, 54] -> actions [1, 11], dynpush {contract.dynpush_version},"
@@ -121,7 +128,8 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Adds this package's subcommands to the ``dynpush`` parser."""
-    p = subparsers.add_parser("export", help="export a run's checkpoint to ONNX with its contract (runs/NAME/policy.onnx)")
+    p = subparsers.add_parser("export", help="export a run's checkpoint to ONNX with its contract (runs/NAME/policy.onnx;"
+                                             " a locomotion run: runs/NAME/locomotion.onnx)")
     p.add_argument("run", help="run folder (runs/NAME with config.json and model_*.pt)")
     p.add_argument("--checkpoint", default=None, help="checkpoint file in the run folder (default: the latest model_K.pt)")
     p.add_argument("--out", default=None, help="output file (default: RUN/policy.onnx)")

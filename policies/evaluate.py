@@ -55,7 +55,7 @@ from dynpush.kernels.observations import POLICY_TERMS, PRIVILEGED_TERMS
 from dynpush.runtime.observation import NUM_ARM_JOINTS, quat_to_matrix
 from dynpush.sim.config import ConfigError, PushEnvConfig
 from dynpush.sim.episode import SHAPES
-from dynpush.sim.push_env import PushEnv
+from dynpush.sim.push_env import PushEnv, make_push_env
 
 from .export import OnnxPolicy
 
@@ -311,7 +311,7 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
     cfg.validate()
     policy = OnnxPolicy(policy_path, batched=True)
     env_cfg = env_config_for(policy, cfg.worlds, cfg.noise, cfg.device, cfg.seed, cfg.overrides)
-    env = PushEnv(env_cfg)
+    env = make_push_env(env_cfg)
     rounds = math.ceil(cfg.episodes / cfg.worlds)
     parts, violated = [], []
     start = time.perf_counter()
@@ -451,7 +451,7 @@ def footprint_study(policy_path: Path, cfg: FootprintConfig, out_dir: Path) -> d
     policy = OnnxPolicy(policy_path, batched=True)
     rows, heights = [], []
     for side in cfg.sides:
-        env = PushEnv(env_config_for(policy, cfg.num_envs, None, cfg.device, cfg.seed, cfg.env_overrides(side)))
+        env = make_push_env(env_config_for(policy, cfg.num_envs, None, cfg.device, cfg.seed, cfg.env_overrides(side)))
         samples: list[float] = []
         attempted = successful = 0
         with tqdm(total=cfg.successful_episodes, desc=f"footprint {side:.2f} m", unit="success") as bar:

@@ -16,6 +16,7 @@ export module (``MLPModel.as_onnx``: normaliser, MLP, deterministic output), tra
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import logging
@@ -33,6 +34,7 @@ from dynpush.runtime.observation import NUM_ACTIONS, NUM_ARM_JOINTS, POLICY_OBSE
 if TYPE_CHECKING:  # torch and rsl_rl are imported where needed: loading and running a policy needs neither
     from rsl_rl.models import MLPModel
 
+    from dynpush.policies.locomotion_train import LocomotionTrainConfig
     from dynpush.policies.train import TrainConfig
 
 OPSET = 18  # as rsl_rl's OnPolicyRunner.export_policy_to_onnx
@@ -44,14 +46,16 @@ def config_sha256(config: dict) -> str:
     return hashlib.sha256(json.dumps(config, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
 
 
-def load_run_config(run_dir: Path) -> TrainConfig:
-    """The :class:`~dynpush.policies.train.TrainConfig` of a run folder (its ``config.json``)."""
+def load_run_config(run_dir: Path) -> TrainConfig | LocomotionTrainConfig:
+    """The training config of a run folder (its ``config.json``): a locomotion run's says ``"task": "locomotion"``."""
+    from dynpush.policies.locomotion_train import LocomotionTrainConfig
     from dynpush.policies.train import TrainConfig
 
     path = Path(run_dir) / "config.json"
     if not path.exists():
         raise FileNotFoundError(f"{path} not found: {run_dir} is not a dynpush run folder")
-    return TrainConfig.from_dict(json.loads(path.read_text()))
+    data = json.loads(path.read_text())
+    return (LocomotionTrainConfig if data.get("task") == "locomotion" else TrainConfig).from_dict(data)
 
 
 def resolve_checkpoint(run_dir: Path, checkpoint: str | None) -> Path:
@@ -65,19 +69,22 @@ def resolve_checkpoint(run_dir: Path, checkpoint: str | None) -> Path:
     return path
 
 
-def build_actor(cfg: TrainConfig) -> MLPModel:
-    """rsl_rl's actor ``MLPModel`` exactly as the training runner builds it from ``cfg.runner_cfg()``."""
+def build_actor(cfg: TrainConfig | LocomotionTrainConfig, observation_size: int = POLICY_OBSERVATION_SIZE,
+                num_actions: int = NUM_ACTIONS) -> MLPModel:
+    """rsl_rl's actor ``MLPModel`` exactly as the training runner builds it from ``cfg.runner_cfg()`` (default
+    sizes: the push policy's)."""
     import torch
     from rsl_rl.models import MLPModel
     from tensordict import TensorDict
 
     runner_cfg = cfg.runner_cfg()
     actor_cfg = {k: v for k, v in runner_cfg["actor"].items() if k != "class_name"}
-    obs = TensorDict({"policy": torch.zeros(1, POLICY_OBSERVATION_SIZE)}, batch_size=[1])
-    return MLPModel(obs, runner_cfg["obs_groups"], "actor", NUM_ACTIONS, **actor_cfg)
+    obs = TensorDict({"policy": torch.zeros(1, observation_size)}, batch_size=[1])
+    return MLPModel(obs, runner_cfg["obs_groups"], "actor", num_actions, **actor_cfg)
 
 
-def load_actor(checkpoint: Path, cfg: TrainConfig) -> MLPModel:
+def load_actor(checkpoint: Path, cfg: TrainConfig | LocomotionTrainConfig, observation_size: int = POLICY_OBSERVATION_SIZE,
+               num_actions: int = NUM_ACTIONS) -> MLPModel:
     """The trained actor (normaliser included) of a checkpoint, in eval mode on the CPU."""
     import torch
 
@@ -87,7 +94,7 @@ def load_actor(checkpoint: Path, cfg: TrainConfig) -> MLPModel:
         raise RuntimeError(f"cannot read checkpoint {checkpoint}: {error}") from error
     if not isinstance(saved, dict) or "actor_state_dict" not in saved:
         raise RuntimeError(f"checkpoint {checkpoint} has no 'actor_state_dict' (not an rsl_rl checkpoint)")
-    actor = build_actor(cfg)
+    actor = build_actor(cfg, observation_size, num_actions)
     try:
         actor.load_state_dict(saved["actor_state_dict"])
     except RuntimeError as error:
@@ -141,13 +148,21 @@ def export_policy(run_dir: Path, checkpoint: str | None = None, out: Path | None
 
     ``out`` defaults to ``run_dir / "policy.onnx"``.
     """
-    import torch
-
     run_dir = Path(run_dir)
     cfg = load_run_config(run_dir)
     checkpoint_path = resolve_checkpoint(run_dir, checkpoint)
-    module = load_actor(checkpoint_path, cfg).as_onnx(verbose=False).to("cpu").eval()
     out = Path(out) if out is not None else run_dir / "policy.onnx"
+    metadata = build_contract(cfg).to_metadata() | {"checkpoint": checkpoint_path.name}
+    write_onnx(load_actor(checkpoint_path, cfg), out, metadata,
+               f"dynpush push policy from {run_dir.name}/{checkpoint_path.name}; contract in metadata_props")
+    return out
+
+
+def write_onnx(actor: MLPModel, out: Path, metadata: dict[str, str], doc_string: str) -> None:
+    """Writes ``actor`` (normaliser, MLP, deterministic mean) as one self-contained ONNX file with ``metadata``."""
+    import torch
+
+    module = actor.as_onnx(verbose=False).to("cpu").eval()
     out.parent.mkdir(parents=True, exist_ok=True)
     # torch's exporter warns about its own internals (deprecated pytree API, optional torchvision ops).
     registration_log = logging.getLogger("torch.onnx._internal.exporter._registration")
@@ -161,19 +176,51 @@ def export_policy(run_dir: Path, checkpoint: str | None = None, out: Path | None
     finally:
         registration_log.setLevel(level)
     model = onnx.load(str(out))
-    contract = build_contract(cfg)
-    metadata = contract.to_metadata() | {"checkpoint": checkpoint_path.name}
     onnx.helper.set_model_props(model, metadata)
-    model.doc_string = f"dynpush push policy from {run_dir.name}/{checkpoint_path.name}; contract in metadata_props"
+    model.doc_string = doc_string
     onnx.checker.check_model(model)
     onnx.save(model, str(out))  # one self-contained file: the weights are inlined again
     out.with_name(out.name + ".data").unlink(missing_ok=True)  # the exporter's external weights, now stale
-    return out
 
 
 def read_metadata(model: onnx.ModelProto) -> dict[str, str]:
     """The ``metadata_props`` of an ONNX model as a dict."""
     return {prop.key: prop.value for prop in model.metadata_props}
+
+
+def check_io(model: onnx.ModelProto, input_name: str, input_size: int, output_name: str, output_size: int,
+             what: str) -> None:
+    """Raises :class:`ContractError` unless ``model`` maps ``input_name`` [batch, input_size] to ``output_name``
+    [batch, output_size]."""
+    inputs = {v.name: v for v in model.graph.input}
+    outputs = {v.name: v for v in model.graph.output}
+    if input_name not in inputs or output_name not in outputs:
+        raise ContractError(f"{what}: graph must have input {input_name!r} and output {output_name!r},"
+                            f" has {sorted(inputs)} -> {sorted(outputs)}")
+    for value, size in ((inputs[input_name], input_size), (outputs[output_name], output_size)):
+        dims = [d.dim_value if d.HasField("dim_value") else d.dim_param for d in value.type.tensor_type.shape.dim]
+        if len(dims) != 2 or dims[1] != size:
+            raise ContractError(f"{what}: {value.name!r} has shape {dims}, expected [batch, {size}]")
+
+
+def single_thread_options() -> onnxruntime.SessionOptions:
+    options = onnxruntime.SessionOptions()
+    options.intra_op_num_threads = 1
+    options.inter_op_num_threads = 1
+    return options
+
+
+def batched_session(model: onnx.ModelProto, input_name: str, input_size: int, output_name: str,
+                    output_size: int, what: str) -> onnxruntime.InferenceSession:
+    """An onnxruntime session of ``model`` (checked with :func:`check_io`) whose batch dimension is relaxed to a
+    symbolic one in an in-memory copy (same graph and weights), so that all worlds run in one call."""
+    check_io(model, input_name, input_size, output_name, output_size, what)
+    model = copy.deepcopy(model)
+    for value in (*model.graph.input, *model.graph.output):
+        if value.name in (input_name, output_name):
+            value.type.tensor_type.shape.dim[0].dim_param = BATCH_DIM
+    del model.graph.value_info[:]  # shape hints of intermediates carry the fixed batch size
+    return onnxruntime.InferenceSession(model.SerializeToString(), single_thread_options(), providers=["CPUExecutionProvider"])
 
 
 class OnnxPolicy:
@@ -189,24 +236,13 @@ class OnnxPolicy:
             raise FileNotFoundError(f"policy file {self.path} not found")
         model = onnx.load(str(self.path))
         self.contract = PolicyContract.from_metadata(read_metadata(model))
-        inputs = {v.name: v for v in model.graph.input}
-        outputs = {v.name: v for v in model.graph.output}
-        if INPUT_NAME not in inputs or OUTPUT_NAME not in outputs:
-            raise ContractError(f"{self.path}: graph must have input {INPUT_NAME!r} and output {OUTPUT_NAME!r},"
-                                f" has {sorted(inputs)} -> {sorted(outputs)}")
-        for value, size in ((inputs[INPUT_NAME], POLICY_OBSERVATION_SIZE), (outputs[OUTPUT_NAME], NUM_ACTIONS)):
-            dims = [d.dim_value if d.HasField("dim_value") else d.dim_param for d in value.type.tensor_type.shape.dim]
-            if len(dims) != 2 or dims[1] != size:
-                raise ContractError(f"{self.path}: {value.name!r} has shape {dims}, expected [batch, {size}]")
-            if batched:
-                value.type.tensor_type.shape.dim[0].dim_param = BATCH_DIM
-        if batched:
-            del model.graph.value_info[:]  # shape hints of intermediates carry the fixed batch size
         self.batch_size: int | None = None if batched else 1
-        options = onnxruntime.SessionOptions()
-        options.intra_op_num_threads = 1
-        options.inter_op_num_threads = 1
-        self.session = onnxruntime.InferenceSession(model.SerializeToString(), options, providers=["CPUExecutionProvider"])
+        if batched:
+            self.session = batched_session(model, INPUT_NAME, POLICY_OBSERVATION_SIZE, OUTPUT_NAME, NUM_ACTIONS, str(self.path))
+        else:
+            check_io(model, INPUT_NAME, POLICY_OBSERVATION_SIZE, OUTPUT_NAME, NUM_ACTIONS, str(self.path))
+            self.session = onnxruntime.InferenceSession(model.SerializeToString(), single_thread_options(),
+                                                        providers=["CPUExecutionProvider"])
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         """Actions [B, 11] (float32, unclipped mean) for observations ``obs`` [B, 54] (B = 1 unless batched)."""

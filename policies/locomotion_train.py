@@ -26,6 +26,7 @@ def _cat_p_max() -> dict[str, tuple[float, float]]:
 
 @dataclass
 class LocomotionTrainConfig:
+    task: str = "locomotion"  # tells a run's config.json from a push run's (policies/export.py: load_run_config)
     preset: str = "cpu"
     env: LocomotionEnvConfig = field(default_factory=LocomotionEnvConfig)
     iterations: int = 1500  # ~37 M world-steps at 1024 worlds x 24 steps (flat-ground tracking converges in ~30 M)
@@ -47,6 +48,8 @@ class LocomotionTrainConfig:
         raise ConfigError(f"preset must be one of {PRESETS}, got {name!r}")
 
     def validate(self) -> LocomotionTrainConfig:
+        if self.task != "locomotion":
+            raise ConfigError(f"task must be 'locomotion', got {self.task!r}")
         self.env.validate()
         for name in ("iterations", "num_steps_per_env", "save_interval"):
             if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:

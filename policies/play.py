@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from dynpush.sim.episode import SHAPES
-from dynpush.sim.push_env import PushEnv
+from dynpush.sim.push_env import PushEnv, make_push_env
 
 from .evaluate import EnvProbe, env_config_for, run_first_episodes, yaw_of
 from .export import OnnxPolicy
@@ -155,7 +155,7 @@ def play(policy_path: Path, episodes: int, out: Path, usd: Path | None = None, n
          seed: int = 0, overrides: tuple[str, ...] = ()) -> dict:
     """Rolls out ``episodes`` first episodes (one per world); writes the PNG ``out``, a JSON beside it, and ``usd``."""
     policy = OnnxPolicy(policy_path, batched=True)
-    env = PushEnv(env_config_for(policy, episodes, noise, "cpu", seed, overrides))
+    env = make_push_env(env_config_for(policy, episodes, noise, "cpu", seed, overrides))
     env.reset(randomize_episode_step=False)
     observer = TrajectoryObserver(env, usd)
     setups = [episode_setup(env, w) for w in range(episodes)]

@@ -66,7 +66,7 @@ from tqdm import tqdm
 
 from dynpush.sim.config import ConfigError
 from dynpush.sim.episode import SHAPES, EpisodeSpec
-from dynpush.sim.push_env import PushEnv
+from dynpush.sim.push_env import make_push_env
 
 from .evaluate import EE_CONTACT_COLUMN, EnvProbe, env_config_for
 from .export import OnnxPolicy
@@ -282,7 +282,7 @@ def run_scenario(policy_path: Path, scenario: Scenario, out_dir: Path, noise: bo
     # The environment's own time-out must never end a goal: the per-goal budget is enforced here.
     env_overrides = (*overrides, f"env.episode_length_s={scenario.goal_timeout_s + 1.0}")
     env_cfg = env_config_for(policy, len(worlds), noise, device, seed, env_overrides)
-    env = PushEnv(env_cfg)
+    env = make_push_env(env_cfg)
     min_friction = 0.5 * env.scene.ground_friction
     for i, obj in enumerate(scenario.objects):
         if obj.friction < min_friction:

@@ -12,17 +12,71 @@ IMU, never mocap, so locomotion keeps standing when mocap is lost):
 - ``arm_joint_position`` (5): ``q_arm - arm default`` (policy contract) [rad]; ``arm_joint_velocity`` (5)
 
 Leg targets = ``default_joint_positions + action_scale * output``.
+
+A ``locomotion.onnx`` written by ``dynpush export`` from a ``dynpush train --task locomotion`` run carries
+its contract in the metadata key ``locomotion_contract`` (:func:`locomotion_contract`): the observation
+terms and scales, joint names and order, default positions and action scale it was trained with. The
+runtime refuses a config that disagrees with it (:func:`check_locomotion_contract`).
 """
 
 from __future__ import annotations
+
+import json
 
 import numpy as np
 
 from .config import LOCOMOTION_TERMS, NUM_LEG_JOINTS, OnnxLocomotionConfig
 from .contract import PolicyContract
+from .errors import StartupError
 from .observation import quat_to_matrix
 from .packets import Proprioception
 from .policy import OnnxModel
+
+LOCOMOTION_CONTRACT_KEY = "locomotion_contract"
+
+
+def locomotion_contract(cfg: OnnxLocomotionConfig, **extra) -> dict[str, str]:
+    """ONNX metadata describing a locomotion network as ``cfg`` runs it (``extra``: further JSON values such as
+    command limits, gains, control period and the training config)."""
+    contract = {
+        "observation": [{"name": t.name, "scale": t.scale} for t in cfg.observation],
+        "joint_names": list(cfg.joint_names),
+        "default_joint_positions": [float(v) for v in cfg.default_joint_positions],
+        "action_scale": float(cfg.action_scale),
+        **extra,
+    }
+    return {LOCOMOTION_CONTRACT_KEY: json.dumps(contract)}
+
+
+def check_locomotion_contract(metadata: dict[str, str], cfg: OnnxLocomotionConfig) -> None:
+    """Raises :class:`StartupError` listing every field where ``cfg`` disagrees with the file's contract (if any)."""
+    if LOCOMOTION_CONTRACT_KEY not in metadata:
+        return  # a network from elsewhere: the config alone describes it
+    try:
+        contract = json.loads(metadata[LOCOMOTION_CONTRACT_KEY])
+        trained = {
+            "observation": [(str(t["name"]), float(t["scale"])) for t in contract["observation"]],
+            "joint_names": [str(n) for n in contract["joint_names"]],
+            "default_joint_positions": [float(v) for v in contract["default_joint_positions"]],
+            "action_scale": float(contract["action_scale"]),
+        }
+    except (ValueError, KeyError, TypeError) as error:
+        raise StartupError(f"locomotion.onnx: malformed {LOCOMOTION_CONTRACT_KEY} metadata ({error})") from error
+    configured = {
+        "observation": [(t.name, float(t.scale)) for t in cfg.observation],
+        "joint_names": list(cfg.joint_names),
+        "default_joint_positions": [float(v) for v in cfg.default_joint_positions],
+        "action_scale": float(cfg.action_scale),
+    }
+    problems = []
+    for name, value in trained.items():
+        mine = configured[name]
+        same = (np.allclose(mine, value, atol=1e-6) if name in ("default_joint_positions", "action_scale")
+                and len(np.atleast_1d(mine)) == len(np.atleast_1d(value)) else mine == value)
+        if not same:
+            problems.append(f"locomotion.onnx.{name}: config has {mine}, the network was trained with {value}")
+    if problems:
+        raise StartupError("locomotion config does not match locomotion.onnx:\n  " + "\n  ".join(problems))
 
 _GRAVITY = np.array([0.0, 0.0, -1.0])
 
@@ -31,6 +85,7 @@ class OnnxLocomotion:
     def __init__(self, cfg: OnnxLocomotionConfig, contract: PolicyContract):
         self.model = OnnxModel(cfg.path, cfg.input_name, cfg.observation_size, cfg.output_name, NUM_LEG_JOINTS,
                                "locomotion.onnx")
+        check_locomotion_contract(self.model.metadata, cfg)
         self._terms = []
         start = 0
         for term in cfg.observation:

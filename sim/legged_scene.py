@@ -70,10 +70,10 @@ def _read_defaults() -> tuple[np.ndarray, np.ndarray]:
     return legs, arm
 
 
-def legged_robot_builder() -> tuple[newton.ModelBuilder, LeggedRobotDescription]:
-    """The legged robot from its USD file (no self-collisions), in its default stance at the nominal height."""
+def legged_robot_builder(enable_self_collisions: bool = False) -> tuple[newton.ModelBuilder, LeggedRobotDescription]:
+    """The legged robot from its USD file, in its default stance at the nominal height."""
     builder = newton.ModelBuilder()
-    builder.add_usd(str(ROBOT_LEGGED_USD), enable_self_collisions=False)
+    builder.add_usd(str(ROBOT_LEGGED_USD), enable_self_collisions=enable_self_collisions)
     leg_default, arm_default = _read_defaults()
     joint = {_leaf(label): j for j, label in enumerate(builder.joint_label)}
     shape = {_leaf(label): s for s, label in enumerate(builder.shape_label)}

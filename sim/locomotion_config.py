@@ -14,7 +14,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from .config import ConfigError, ConstraintConfig, RandomizationConfig, _check_positive, _check_range
+from .config import ConfigError, ConstraintConfig, MuJoCoConfig, RandomizationConfig, _check_positive, _check_range
 
 _PUSH_CONSTRAINTS = ConstraintConfig()
 _PUSH_RANDOMIZATION = RandomizationConfig()
@@ -133,26 +133,6 @@ class LocomotionNoiseConfig:
 
     def half_width(self, term: str) -> float:
         return getattr(self, term, 0.0)
-
-
-@dataclass
-class MuJoCoConfig:
-    """MuJoCo-Warp solver settings, chosen by measurement (benchmarks/locomotion_throughput.py): at 512 worlds on
-    one core CG with 5 iterations ran 5.6k world-steps/s where MuJoCo's defaults (Newton solver, larger
-    buffers) ran 3.4k; a robot uses at most 32 constraint rows and ~17 contact candidates."""
-
-    solver: str = "cg"
-    iterations: int = 5
-    ls_iterations: int = 5
-    nconmax: int = 24  # contacts per world
-    njmax: int = 64  # constraint rows per world
-
-    def validate(self, prefix: str = "mujoco") -> None:
-        if self.solver not in ("cg", "newton"):
-            raise ConfigError(f"{prefix}.solver must be 'cg' or 'newton', got {self.solver!r}")
-        for name in ("iterations", "ls_iterations", "nconmax", "njmax"):
-            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
-                raise ConfigError(f"{prefix}.{name} must be an integer >= 1, got {getattr(self, name)!r}")
 
 
 @dataclass

@@ -172,7 +172,8 @@ class LocomotionEnv(VecEnv):
 
     def _step_kernels(self) -> None:
         cfg = self.cfg
-        self._launch(k.process_actions, [self.raw_actions, self.params, self.view, self.task, self.control.joint_target_q])
+        self._launch(k.process_leg_actions, [self.raw_actions, self.params, self.view, self.task, self.control.joint_target_q])
+        self._launch(k.write_arm_targets, [self.view, self.task, self.control.joint_target_q])
         dt = cfg.control_dt / cfg.substeps
         for sub in range(cfg.substeps):
             state_in, state_out = (self.state_0, self.state_1) if sub % 2 == 0 else (self.state_1, self.state_0)

@@ -48,6 +48,15 @@ def _articulation_mask(reset: wp.array(dtype=int), articulation_world: wp.array(
     mask[a] = w >= 0 and reset[w] != 0
 
 
+def make_push_env(cfg: PushEnvConfig) -> PushEnv:
+    """The push environment of ``cfg``: the tracked base, or with ``cfg.legged.enabled`` the legged robot."""
+    if cfg.legged.enabled:
+        from .legged_push_env import LeggedPushEnv
+
+        return LeggedPushEnv(cfg)
+    return PushEnv(cfg)
+
+
 class PushEnv(VecEnv):
     """Goal pushing with a tracked-base mobile manipulator (paper III); see the module docstring."""
 
@@ -60,7 +69,7 @@ class PushEnv(VecEnv):
         self.wp_device = wp.get_device(cfg.device)
         self.constraint_groups = list(CONSTRAINT_GROUPS)
         with wp.ScopedDevice(self.wp_device):
-            self.scene = build_scene(cfg.num_envs, cfg.device)
+            self.scene = self._build_scene()
             # Newton averages the two coefficients of a contact: the object's own is 2 * combined - floor.
             if 2.0 * cfg.randomization.friction[0] < self.scene.ground_friction:
                 raise ConfigError(f"randomization.friction[0] must be >= half the floor's coefficient"
@@ -69,11 +78,17 @@ class PushEnv(VecEnv):
             self._make_buffers()
             self._make_params()
             self.reset(randomize_episode_step=cfg.randomize_first_episode_length)
-            with wp.ScopedCapture() as capture:  # works on the CPU device too (NEWTON_NOTES.md)
-                self._step_kernels()
-            self._graph = capture.graph
+            self._capture()
+
+    def _capture(self) -> None:
+        with wp.ScopedCapture() as capture:  # works on the CPU device too (NEWTON_NOTES.md)
+            self._step_kernels()
+        self._graph = capture.graph
 
     # ------------------------------------------------------------------ construction
+    def _build_scene(self):
+        return build_scene(self.cfg.num_envs, self.cfg.device)
+
     def _make_solver(self) -> None:
         model = self.scene.model
         if self.cfg.sim.solver == "xpbd":
@@ -246,7 +261,9 @@ class PushEnv(VecEnv):
         cp = constraints_k.ConstraintParams()
         cp.base_lower = f32(c.base_command_lower)
         cp.base_upper = f32(c.base_command_upper)
-        cp.leg_torque_map = wp.array(robot.leg_torque_map.astype(np.float32), dtype=float)
+        # Articulated legs (LeggedPushEnv) overwrite the leg-torque columns with the simulated torques.
+        torque_map = robot.leg_torque_map if robot.leg_torque_map is not None else np.zeros((12, 6))
+        cp.leg_torque_map = wp.array(torque_map.astype(np.float32), dtype=float)
         cp.leg_nominal_torque = f32(np.tile(c.leg_nominal_torque, 4))
         cp.object_tilt_limit = math.radians(c.object_tilt_limit_deg)
         cp.base_moving_speed = c.base_moving_speed
@@ -313,8 +330,7 @@ class PushEnv(VecEnv):
             state_in, state_out = states[sub % 2], states[(sub + 1) % 2]
             view = self.views[sub % 2]
             with self._stage("kernels"):
-                state_in.clear_forces()
-                self._launch(base_tracking.apply_base_wrench, [view, self.task, self.tracking_params, state_in.body_f])
+                self._drive_base(view, state_in)
             with self._stage("collision"):
                 self.collision.collide(state_in, c)
                 wp.launch(
@@ -329,13 +345,28 @@ class PushEnv(VecEnv):
             with self._stage("physics"):
                 self.solver.step(state_in, state_out, self.control, c, dt)
 
+    def _drive_base(self, view: RobotView, state: newton.State) -> None:
+        """The tracked base: the tracking wrench of the current command, on ``state`` (one substep)."""
+        state.clear_forces()
+        self._launch(base_tracking.apply_base_wrench, [view, self.task, self.tracking_params, state.body_f])
+
     def _step_kernels(self) -> None:
         """Everything of one control step; captured once into a graph."""
+        self._process_actions()
+        self._physics_and_task()
+
+    def _process_actions(self) -> None:
+        cfg = self.cfg
+        with self._stage("kernels"):
+            self._launch(actions_k.process_actions, [self.raw_actions, self.views[0], self.task, self.base_default,
+                                                     self.base_scale, cfg.actions.arm_scale, cfg.actions.clip,
+                                                     self.control.joint_target_q])
+
+    def _physics_and_task(self) -> None:
+        """Physics substeps, then rewards, constraints, terminations, resets and observations."""
         cfg, model, view = self.cfg, self.scene.model, self.views[0]
         seed = cfg.seed
         with self._stage("kernels"):
-            self._launch(actions_k.process_actions, [self.raw_actions, view, self.task, self.base_default, self.base_scale,
-                                                     cfg.actions.arm_scale, cfg.actions.clip, self.control.joint_target_q])
             self.task.contacts.zero_()
         self._physics_substeps()
         with self._stage("kernels"):
@@ -345,6 +376,7 @@ class PushEnv(VecEnv):
                                                      self.reward_terms, self.success])
             self._launch(constraints_k.compute_constraints, [view, self.task, self.arm_limits, self.constraint_params,
                                                              self.constraints])
+            self._robot_constraints()
             self._launch(terminations.compute_terminations, [view, self.task, self.termination_params, self.success,
                                                              self.reset_flags, self.time_out, self.episode_success,
                                                              self.episode_toppled])
@@ -364,6 +396,7 @@ class PushEnv(VecEnv):
             self.reset_flags, self.spec, self.sampling_params, view, self.task, self.base_default,
             self.scene.robot.base_mass, self.robot_q_start, self.object_q_start, self.state_0.joint_q,
             model.body_mass, model.body_inv_mass, self.variant])
+        self._start_robot_flagged()
         flags = model.select_body_variants(self.variant, bodies=self.object_body)
         self._launch(sampling.apply_object_properties, [
             self.reset_flags, self.task, self.object_body, self.object_shape, model.shape_scale,
@@ -376,6 +409,12 @@ class PushEnv(VecEnv):
                   inputs=[self.reset_flags, model.articulation_world, self.articulation_mask], device=self.wp_device)
         newton.eval_fk(model, self.state_0.joint_q, self.state_0.joint_qd, self.state_0, mask=self.articulation_mask)
         self.solver.notify_model_changed(flags)
+
+    def _robot_constraints(self) -> None:
+        """Constraint columns a robot model computes itself (the tracked base has none beyond the kernels')."""
+
+    def _start_robot_flagged(self) -> None:
+        """Robot state beyond the free base and the arm for flagged worlds (the tracked base has none)."""
 
     def set_episodes(self, episodes: dict[int, EpisodeSpec]) -> TensorDict:
         """Starts user-chosen episodes (evaluation scenarios, tests) in the given worlds, now.
@@ -466,6 +505,9 @@ class PushEnv(VecEnv):
         self.actions_t.copy_(actions)
         with wp.ScopedDevice(self.wp_device):
             wp.capture_launch(self._graph)
+        return self._step_result()
+
+    def _step_result(self) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
         dones = self.reset_t.to(torch.long)
         extras = {
             "time_outs": self.time_out_t.to(torch.bool),

@@ -15,10 +15,13 @@ import numpy as np
 import warp as wp
 from pxr import Usd
 
-from dynpush.assets_usd import ARM_JOINT_NAMES, ARM_LINK_NAMES, CUBOID_USD, CYLINDER_USD, GROUND_USD, LEG_SHAPE_NAMES, ROBOT_USD
+from dynpush.assets_usd import (
+    ARM_JOINT_NAMES, ARM_LINK_NAMES, CUBOID_USD, CYLINDER_USD, GROUND_USD, LEG_JOINT_NAMES, LEG_SHAPE_NAMES, ROBOT_USD,
+)
 from dynpush.kernels.contacts import ROLE_EE, ROLE_NONE, ROLE_OBJECT, ROLE_ROBOT
 
 from .leg_statics import leg_torque_map
+from .legged_scene import LEGS, LeggedRobotDescription, legged_robot_builder
 
 wp.config.log_level = wp.LOG_WARNING  # no per-module "load on device" lines on the console
 
@@ -46,7 +49,8 @@ class RobotDescription:
     arm_damping: np.ndarray  # (6,)
     arm_peak_torque: np.ndarray  # (6,)
     base_mass: float
-    leg_torque_map: np.ndarray  # (12, 6)
+    leg_torque_map: np.ndarray | None  # (12, 6) quasi-static leg torques of a base wrench; None with articulated legs
+    legged: LeggedRobotDescription | None = None  # the articulated legs (robot_legged.usda), else None
 
 
 @dataclass
@@ -74,6 +78,12 @@ class Scene:
     robot_body_count: int
     shape_role: np.ndarray  # (shape_count,) ROLE_* or a collision column
     shape_self_column: np.ndarray  # (shape_count,) self-collision column or -1
+    # Articulated legs only (build_scene(legged=True)), in LEG_JOINT_NAMES order, else None:
+    leg_q: np.ndarray | None = None  # (N, 12) joint_q indices
+    leg_qd: np.ndarray | None = None  # (N, 12) joint_qd indices
+    arm_q: np.ndarray | None = None  # (N, 6) joint_q indices
+    arm_qd: np.ndarray | None = None  # (N, 6)
+    shank_body: np.ndarray | None = None  # (N, 4) LF, RF, LH, RH
 
 
 def _read_robot_attributes() -> tuple[np.ndarray, dict[str, np.ndarray]]:
@@ -89,9 +99,12 @@ def _read_robot_attributes() -> tuple[np.ndarray, dict[str, np.ndarray]]:
     return arm_default, legs
 
 
-def _robot_builder() -> tuple[newton.ModelBuilder, RobotDescription, dict]:
-    builder = newton.ModelBuilder()
-    builder.add_usd(str(ROBOT_USD), enable_self_collisions=True)
+def _robot_builder(legged: bool) -> tuple[newton.ModelBuilder, RobotDescription, dict]:
+    if legged:
+        builder, legs_description = legged_robot_builder(enable_self_collisions=True)
+    else:
+        builder = newton.ModelBuilder()
+        builder.add_usd(str(ROBOT_USD), enable_self_collisions=True)
     arm_default, legs = _read_robot_attributes()
 
     joint_index = {_leaf(label): j for j, label in enumerate(builder.joint_label)}
@@ -100,25 +113,29 @@ def _robot_builder() -> tuple[newton.ModelBuilder, RobotDescription, dict]:
     shape_index = {_leaf(label): s for s, label in enumerate(builder.shape_label)}
     body_index = {_leaf(label): b for b, label in enumerate(builder.body_label)}
 
-    # Arm links do not collide with each other (adjacent capsules overlap by construction).
+    # Arm links do not collide with each other (adjacent capsules overlap by construction); articulated legs
+    # collide with neither the base nor each other (hips and thighs overlap the base box by construction).
     arm_shapes = [s for s in range(builder.shape_count) if _leaf(builder.body_label[builder.shape_body[s]]) in ARM_LINK_NAMES]
-    for i, a in enumerate(arm_shapes):
-        for b in arm_shapes[i + 1 :]:
-            builder.add_shape_collision_filter_pair(a, b)
+    body_shapes = [s for s in range(builder.shape_count) if s not in arm_shapes] if legged else []
+    for group in (arm_shapes, body_shapes):
+        for i, a in enumerate(group):
+            for b in group[i + 1 :]:
+                builder.add_shape_collision_filter_pair(a, b)
 
-    # Knees from the thigh capsules: the capsule end farther from the hip.
-    knees, haa, hfe = [], [], []
-    for leg, name in enumerate(("LF", "RF", "LH", "RH")):
-        s = shape_index[f"{name}_thigh"]
-        xform = builder.shape_transform[s]
-        half = builder.shape_scale[s][1]
-        ends = [np.array(wp.transform_point(xform, wp.vec3(0.0, 0.0, sign * half))) for sign in (-1.0, 1.0)]
-        hip = legs["hip"][leg]
-        ends.sort(key=lambda p: np.linalg.norm(p - hip))
-        hfe.append(ends[0])
-        knees.append(ends[1])
-        haa.append(hip)
-    torque_map = leg_torque_map(np.array(haa), np.array(hfe), np.array(knees), legs["foot"])
+    torque_map = None
+    if not legged:  # knees from the thigh capsules on the base: the capsule end farther from the hip
+        knees, haa, hfe = [], [], []
+        for leg, name in enumerate(LEGS):
+            s = shape_index[f"{name}_thigh"]
+            xform = builder.shape_transform[s]
+            half = builder.shape_scale[s][1]
+            ends = [np.array(wp.transform_point(xform, wp.vec3(0.0, 0.0, sign * half))) for sign in (-1.0, 1.0)]
+            hip = legs["hip"][leg]
+            ends.sort(key=lambda p: np.linalg.norm(p - hip))
+            hfe.append(ends[0])
+            knees.append(ends[1])
+            haa.append(hip)
+        torque_map = leg_torque_map(np.array(haa), np.array(hfe), np.array(knees), legs["foot"])
 
     description = RobotDescription(
         arm_default=arm_default,
@@ -130,14 +147,18 @@ def _robot_builder() -> tuple[newton.ModelBuilder, RobotDescription, dict]:
         arm_peak_torque=take(builder.joint_effort_limit),
         base_mass=float(builder.body_mass[body_index["base"]]),
         leg_torque_map=torque_map,
+        legged=legs_description if legged else None,
     )
     names = {"shape": shape_index, "body": body_index, "joint": joint_index, "arm_shapes": arm_shapes}
     return builder, description, names
 
 
-def build_scene(num_worlds: int, device: str) -> Scene:
-    """Replicates robot + object into ``num_worlds`` worlds and finalizes the model on ``device``."""
-    robot, description, names = _robot_builder()
+def build_scene(num_worlds: int, device: str, legged: bool = False) -> Scene:
+    """Replicates robot + object into ``num_worlds`` worlds and finalizes the model on ``device``.
+
+    ``legged``: the robot of ``robot_legged.usda`` (articulated legs whose feet stand on the ground) instead of
+    the tracked base's ``robot.usda`` (leg colliders on the base that never touch the ground)."""
+    robot, description, names = _robot_builder(legged)
 
     variants = []
     for path in (CUBOID_USD, CYLINDER_USD):
@@ -156,9 +177,9 @@ def build_scene(num_worlds: int, device: str) -> Scene:
     builder.add_usd(str(GROUND_USD))
     ground_shapes = [s for s in range(builder.shape_count) if builder.shape_world[s] < 0]
 
-    # Leg capsules stand for stepping legs: they never touch the floor (the tracked base floats).
+    # Leg capsules of the tracked base stand for stepping legs: they never touch the floor (the base floats).
     shapes_per_world = world.shape_count
-    leg_local = [names["shape"][n] for n in LEG_SHAPE_NAMES]
+    leg_local = [] if legged else [names["shape"][n] for n in LEG_SHAPE_NAMES]
     for w in range(num_worlds):
         for s in leg_local:
             for g in ground_shapes:
@@ -197,6 +218,17 @@ def build_scene(num_worlds: int, device: str) -> Scene:
     ee_local_body = robot.shape_body[ee_shape]
     ee_offset = np.array(wp.transform_get_translation(robot.shape_transform[ee_shape]))
     object_first_shape = robot.shape_count
+    legs = {}
+    if legged:
+        def coordinates(joints):
+            return w_idx[:, None] * coords_per_world + np.array([joint_q_start[names["joint"][n]] for n in joints])
+
+        def velocities(joints):
+            return w_idx[:, None] * dofs_per_world + np.array([joint_qd_start[names["joint"][n]] for n in joints])
+
+        legs = {"leg_q": coordinates(LEG_JOINT_NAMES), "leg_qd": velocities(LEG_JOINT_NAMES),
+                "arm_q": coordinates(ARM_JOINT_NAMES), "arm_qd": velocities(ARM_JOINT_NAMES),
+                "shank_body": w_idx[:, None] * bodies_per_world + np.array([names["body"][f"{leg}_SHANK"] for leg in LEGS])}
 
     return Scene(
         model=model,
@@ -220,4 +252,5 @@ def build_scene(num_worlds: int, device: str) -> Scene:
         robot_body_count=robot_body_count,
         shape_role=shape_role,
         shape_self_column=shape_self_column,
+        **legs,
     )

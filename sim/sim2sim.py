@@ -59,7 +59,7 @@ from dynpush.runtime.sim2sim import EVENT_PREFIX
 from dynpush.runtime.timing import RealClock, Ticker
 from dynpush.runtime.udp import UdpEndpoint
 
-from .push_env import PushEnv
+from .push_env import make_push_env
 
 OPERATING_STATES = (State.PUSH, State.HOLD, State.MOCAP_LOST)
 
@@ -116,7 +116,7 @@ class SimRobot:
         self.cfg = cfg
         policy = OnnxPolicy(cfg.policy)
         self.contract = policy.contract
-        self.env = PushEnv(env_config_for(policy, 1, noise=False, seed=cfg.seed, overrides=cfg.overrides))
+        self.env = make_push_env(env_config_for(policy, 1, noise=False, seed=cfg.seed, overrides=cfg.overrides))
         check_contract_matches_env(self.contract, self.env)
         self.probe = EnvProbe(self.env)
         scene = self.env.scene

@@ -513,6 +513,32 @@ def test_goal_difficulty_scales_the_goal_yaw_change():
     close(wrap(goals[0.0][:, 2] - object_yaw), 0.0, atol=1e-6)
 
 
+def test_sample_episodes_draws_are_independent():
+    """Every random quantity of an episode is its own draw: no two are correlated (|r| < 0.06 at n = 8000, where
+    independent draws give |r| ~ 0.011). A wp.func receives the rng state by value, so draws inside one that
+    did not fork a stream used to repeat the caller's next draw: robot bearing = goal bearing, friction = object
+    yaw, ..."""
+    n = 8000
+    _, task_np = random_state(np.random.default_rng(5), n)
+    task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(6), n))
+    launch(sampling.sample_episodes, n, arr(np.ones(n, np.int32), int), 13, sampling_params(cylinder_probability=0.0),
+           arr([1.0]), task, spec)
+    out = read_struct(sampling.EpisodeSpec, spec)
+    goal, base, d = out["goal"], out["base"], out["dims"]
+    draws = {
+        "size_x": d[:, 0], "size_z": d[:, 2], "mass": out["mass"], "com_x": out["com_o"][:, 0] / d[:, 0],
+        "friction": out["friction"], "object_yaw": out["object_yaw"], "reach_target_z": out["reach_target_o"][:, 2] / d[:, 2],
+        "goal_r2": (goal[:, :2] ** 2).sum(1), "goal_bearing": np.arctan2(goal[:, 1], goal[:, 0]), "goal_yaw": goal[:, 2],
+        "base_r2": (base[:, :2] ** 2).sum(1), "base_bearing": np.arctan2(base[:, 1], base[:, 0]), "base_yaw": base[:, 2],
+        "arm_q0": out["arm_q"][:, 0], "base_mass_offset": out["base_mass_offset"], "first_push_step": out["first_push_step"],
+    }
+    names = list(draws)
+    r = np.corrcoef(np.array([draws[k] for k in names], dtype=np.float64))
+    np.fill_diagonal(r, 0.0)
+    i, j = np.unravel_index(np.abs(r).argmax(), r.shape)
+    assert abs(r[i, j]) < 0.06, f"{names[i]} and {names[j]} are correlated (r = {r[i, j]:.3f})"
+
+
 def test_sample_episodes():
     rng = np.random.default_rng(7)
     n = 20000

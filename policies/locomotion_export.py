@@ -1,0 +1,83 @@
+"""ONNX export of a trained locomotion policy (``dynpush export`` of a ``--task locomotion`` run).
+
+``locomotion.onnx``: input ``obs`` [1, 61] float32, the un-normalised observation in the layout of
+``dynpush.kernels.locomotion.POLICY_TERMS`` (every term of the runtime's ``LOCOMOTION_TERMS``, scale 1);
+output ``actions`` [1, 12] float32, the deterministic mean before the environment's clip. Leg targets
+``default + action_scale * actions`` in ``LEG_JOINT_NAMES`` order. The metadata holds the runtime's
+:class:`~dynpush.runtime.config.OnnxLocomotionConfig` fields (checked by the runtime at start-up) plus the
+command limits, PD gains, control period and training config, and :func:`runtime_config` turns a file back
+into the runtime's config section.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import onnx
+
+from dynpush.assets_usd import LEG_JOINT_NAMES
+from dynpush.kernels.locomotion import NUM_LEG_JOINTS, NUM_POLICY_OBS, POLICY_TERMS
+from dynpush.runtime.config import LocomotionTerm, OnnxLocomotionConfig
+from dynpush.runtime.locomotion import LOCOMOTION_CONTRACT_KEY, locomotion_contract
+
+from .export import config_sha256, load_actor, load_run_config, read_metadata, resolve_checkpoint, write_onnx
+from .locomotion_train import LocomotionTrainConfig
+
+
+def runtime_section(cfg: LocomotionTrainConfig, path: str) -> OnnxLocomotionConfig:
+    """The runtime's ``locomotion.onnx`` config section for a network trained with ``cfg`` at ``path``."""
+    from dynpush.sim.legged_scene import legged_robot_builder
+
+    robot = legged_robot_builder()[1]
+    return OnnxLocomotionConfig(
+        path=path,
+        observation=[LocomotionTerm(name=name, scale=1.0) for name, _ in POLICY_TERMS],
+        joint_names=list(LEG_JOINT_NAMES),
+        default_joint_positions=robot.leg_default.tolist(),
+        action_scale=cfg.env.action_scale,
+    )
+
+
+def export_locomotion(run_dir: Path, checkpoint: str | None = None, out: Path | None = None) -> Path:
+    """Exports a locomotion run's checkpoint (default: the latest) to ``run_dir / "locomotion.onnx"`` (or ``out``)."""
+    from dynpush.sim.legged_scene import legged_robot_builder
+
+    run_dir = Path(run_dir)
+    cfg = load_run_config(run_dir)
+    if not isinstance(cfg, LocomotionTrainConfig):
+        raise ValueError(f"{run_dir} is not a locomotion run (its config.json lacks \"task\": \"locomotion\")")
+    checkpoint_path = resolve_checkpoint(run_dir, checkpoint)
+    out = Path(out) if out is not None else run_dir / "locomotion.onnx"
+    robot = legged_robot_builder()[1]
+    training_config = json.loads(json.dumps(cfg.to_dict()))
+    metadata = locomotion_contract(
+        runtime_section(cfg, out.name),
+        command_names=["vx", "vy", "yaw_rate", "roll", "pitch", "height"],
+        command_lower=list(cfg.env.commands.lower),
+        command_upper=list(cfg.env.commands.upper),
+        action_clip=cfg.env.action_clip,
+        control_period_s=cfg.env.control_dt,
+        joint_stiffness=robot.leg_stiffness.tolist(),
+        joint_damping=robot.leg_damping.tolist(),
+        joint_effort_limit=robot.leg_effort_limit.tolist(),
+        checkpoint=checkpoint_path.name,
+        training_config=training_config,
+        training_config_sha256=config_sha256(training_config),
+    )
+    actor = load_actor(checkpoint_path, cfg, NUM_POLICY_OBS, NUM_LEG_JOINTS)
+    write_onnx(actor, out, metadata,
+               f"dynpush locomotion policy from {run_dir.name}/{checkpoint_path.name}; contract in metadata_props")
+    return out
+
+
+def runtime_config(path: Path) -> OnnxLocomotionConfig:
+    """The runtime's ``locomotion.onnx`` section read back from an exported file's contract."""
+    contract = json.loads(read_metadata(onnx.load(str(path)))[LOCOMOTION_CONTRACT_KEY])
+    return OnnxLocomotionConfig(
+        path=str(path),
+        observation=[LocomotionTerm(name=t["name"], scale=t["scale"]) for t in contract["observation"]],
+        joint_names=contract["joint_names"],
+        default_joint_positions=contract["default_joint_positions"],
+        action_scale=contract["action_scale"],
+    )

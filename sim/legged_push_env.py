@@ -1,0 +1,177 @@
+"""LeggedPushEnv: the push task with articulated legs and a frozen locomotion policy in the loop (issue 8).
+
+Everything of :class:`~dynpush.sim.push_env.PushEnv` is kept (sampling, object, rewards, constraints,
+terminations, observations of the push policy) except the base: ``robot_legged.usda`` stands on its feet on
+MuJoCo-Warp (Newton's contacts, which the object's body variants need), and at every control step (50 Hz,
+the push policy's rate) the push policy's 6D base command goes to the locomotion policy, whose 12 outputs
+become the leg joint targets of the PD drives. The leg-torque constraint columns hold the simulated PD
+torques ``|tau| - tau_nominal`` instead of the tracked base's quasi-static estimate.
+
+One control step is two captured graphs around the locomotion network (onnxruntime, all worlds in one
+call): (1) push actions -> base command and arm targets, and the locomotion observation of every world;
+(2) leg actions -> leg targets, physics, then the push task's rewards, constraints, terminations, resets
+and observations. Without a locomotion policy (``legged.locomotion_policy = ""``) the leg targets come from
+:meth:`LeggedPushEnv.set_leg_targets` (sim-to-sim: the runtime runs the locomotion ONNX).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+import warp as wp
+
+from dynpush.kernels import locomotion as loco
+from dynpush.kernels.constraints import CONSTRAINT_GROUPS
+from dynpush.runtime.locomotion import LOCOMOTION_CONTRACT_KEY
+
+from .push_env import PushEnv
+from .scene import build_scene
+
+LEG_TORQUE_COLUMN = sum(size for name, size in CONSTRAINT_GROUPS[: [n for n, _ in CONSTRAINT_GROUPS].index("leg_joint_torque")])
+
+
+class LocomotionNetwork:
+    """A ``locomotion.onnx`` (``dynpush export`` of a locomotion run) run by onnxruntime on all worlds at once."""
+
+    def __init__(self, path: str):
+        import json
+
+        import onnx
+
+        from dynpush.policies.export import batched_session, read_metadata
+
+        model = onnx.load(path)
+        metadata = read_metadata(model)
+        if LOCOMOTION_CONTRACT_KEY not in metadata:
+            raise ValueError(f"{path} has no {LOCOMOTION_CONTRACT_KEY} metadata: not a dynpush locomotion policy")
+        self.contract = json.loads(metadata[LOCOMOTION_CONTRACT_KEY])
+        terms = [(t["name"], t["scale"]) for t in self.contract["observation"]]
+        if terms != [(name, 1.0) for name, _ in loco.POLICY_TERMS]:
+            raise ValueError(f"{path}: observation {terms} differs from the simulator's {list(loco.POLICY_TERMS)} (scale 1)")
+        self.session = batched_session(model, "obs", loco.NUM_POLICY_OBS, "actions", loco.NUM_LEG_JOINTS, path)
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        return self.session.run(["actions"], {"obs": obs})[0]
+
+
+class LeggedPushEnv(PushEnv):
+    """See the module docstring."""
+
+    def __init__(self, cfg):
+        path = cfg.legged.locomotion_policy
+        self.locomotion = LocomotionNetwork(path) if path else None
+        super().__init__(cfg)
+
+    # ------------------------------------------------------------------ construction
+    def _build_scene(self):
+        return build_scene(self.cfg.num_envs, self.cfg.device, legged=True)
+
+    def _make_solver(self) -> None:
+        import mujoco_warp
+        import newton
+
+        model, m = self.scene.model, self.cfg.legged.mujoco
+        self.solver = newton.solvers.SolverMuJoCo(model, use_mujoco_contacts=False, solver=m.solver, iterations=m.iterations,
+                                                  ls_iterations=m.ls_iterations, nconmax=m.nconmax, njmax=m.njmax)
+        self.solver.mjw_model.opt.warn_overflow &= ~(mujoco_warp.OverflowType.ITERATIONS | mujoco_warp.OverflowType.LS_ITERATIONS)
+        self.state_0, self.state_1 = model.state(), model.state()
+        self.control = model.control()
+        self.collision = newton.CollisionPipeline(model, rigid_contact_max=self.cfg.sim.contacts_per_world * self.num_envs)
+        self.contacts = self.collision.contacts()
+
+    def _make_buffers(self) -> None:
+        super()._make_buffers()
+        n, scene = self.num_envs, self.scene
+        i32 = lambda a: wp.array(np.asarray(a, dtype=np.int32), dtype=int)  # noqa: E731
+        i32_2d = lambda a: wp.array2d(np.asarray(a, dtype=np.int32), dtype=int)  # noqa: E731
+        view = loco.LeggedView()
+        view.body_q, view.body_qd = self.state_0.body_q, self.state_0.body_qd
+        view.joint_q, view.joint_qd = self.state_0.joint_q, self.state_0.joint_qd
+        view.base_body, view.base_q_start, view.base_qd_start = i32(scene.base_body), i32(scene.robot_q_start), i32(scene.robot_qd_start)
+        view.robot_qd_count = scene.robot_qd_count
+        view.leg_q, view.leg_qd = i32_2d(scene.leg_q), i32_2d(scene.leg_qd)
+        view.arm_q, view.arm_qd = i32_2d(scene.arm_q), i32_2d(scene.arm_qd)
+        view.shank_body = i32_2d(scene.shank_body)
+        self.leg_view = view
+        task = loco.LocomotionTask()
+        task.command = self.task.base_command  # the push policy's absolute 6D command is the locomotion command
+        for name, width in (("actions", loco.NUM_LEG_JOINTS), ("last_actions", loco.NUM_LEG_JOINTS),
+                            ("leg_target", loco.NUM_LEG_JOINTS), ("leg_velocity_last", loco.NUM_LEG_JOINTS),
+                            ("arm_target", loco.NUM_ARM_JOINTS + 1), ("foot_air_time", loco.NUM_FEET),
+                            ("touchdown_air_time", loco.NUM_FEET)):
+            setattr(task, name, wp.zeros((n, width), dtype=float))
+        task.foot_contact = wp.zeros((n, loco.NUM_FEET), dtype=int)
+        task.base_mass_offset = wp.zeros(n, dtype=float)
+        for name in ("episode_step", "next_command_step", "next_arm_step", "next_push_step", "rng_counter"):
+            setattr(task, name, wp.zeros(n, dtype=int))
+        self.leg_task = task
+        self.leg_actions = wp.zeros((n, loco.NUM_LEG_JOINTS), dtype=float)
+        self.leg_obs = wp.zeros((n, loco.NUM_POLICY_OBS), dtype=float)
+        self.leg_critic_obs = wp.zeros((n, loco.NUM_CRITIC_OBS), dtype=float)
+        self.leg_actions_t = wp.to_torch(self.leg_actions)
+        self.leg_obs_t = wp.to_torch(self.leg_obs)
+
+    def _make_params(self) -> None:
+        super()._make_params()
+        legs = self.scene.robot.legged
+        f32 = lambda a: wp.array(np.asarray(a, dtype=np.float32), dtype=float)  # noqa: E731
+        action_scale = 0.5
+        if self.locomotion is not None:
+            contract = self.locomotion.contract
+            if not np.allclose(contract["default_joint_positions"], legs.leg_default, atol=1e-5):
+                raise ValueError(f"{self.cfg.legged.locomotion_policy}: default_joint_positions"
+                                 f" {contract['default_joint_positions']} differ from robot_legged.usda's {legs.leg_default.tolist()}")
+            action_scale = float(contract["action_scale"])
+        p = loco.LocomotionParams()
+        p.leg_default = f32(legs.leg_default)
+        p.arm_default = f32(self.scene.robot.arm_default)
+        p.action_scale, p.clip = action_scale, self.cfg.actions.clip
+        self.leg_params = p
+        lim = loco.LeggedLimits()
+        lim.stiffness, lim.damping, lim.effort_limit = f32(legs.leg_stiffness), f32(legs.leg_damping), f32(legs.leg_effort_limit)
+        lim.nominal_torque = f32(np.tile(self.cfg.constraints.leg_nominal_torque, 4))
+        self.leg_limits = lim
+        self.noise_free = f32(np.zeros(loco.NUM_POLICY_OBS))
+
+    def _capture(self) -> None:
+        with wp.ScopedCapture() as capture:
+            self._process_actions()
+            self._launch(loco.compute_observations, [self.leg_view, self.leg_task, self.leg_params, self.noise_free, 0,
+                                                     self.cfg.seed, self.leg_obs, self.leg_critic_obs])
+        self._graph_actions = capture.graph
+        with wp.ScopedCapture() as capture:
+            self._launch(loco.process_leg_actions, [self.leg_actions, self.leg_params, self.leg_view, self.leg_task,
+                                                    self.control.joint_target_q])
+            self._physics_and_task()
+        self._graph = capture.graph
+
+    # ------------------------------------------------------------------ the step
+    def _drive_base(self, view, state) -> None:
+        """The legs carry the base: no tracking wrench."""
+
+    def _robot_constraints(self) -> None:
+        self._launch(loco.write_leg_torque_constraints, [self.leg_view, self.leg_task, self.leg_limits, self.constraints,
+                                                         LEG_TORQUE_COLUMN])
+
+    def _start_robot_flagged(self) -> None:
+        self._launch(loco.start_legs, [self.reset_flags, self.leg_params, self.leg_view, self.leg_task])
+
+    def set_leg_targets(self, targets: np.ndarray) -> None:
+        """Leg joint targets [rad] (num_envs, 12, ``LEG_JOINT_NAMES`` order) for the next steps, when no locomotion
+        policy runs inside the environment (they are applied as the actions of the locomotion contract)."""
+        if self.locomotion is not None:
+            raise RuntimeError("set_leg_targets: this environment runs its own locomotion policy")
+        targets = np.asarray(targets, dtype=np.float32)
+        if targets.shape != (self.num_envs, loco.NUM_LEG_JOINTS) or not np.all(np.isfinite(targets)):
+            raise ValueError(f"leg targets must be finite with shape ({self.num_envs}, 12), got {targets.shape}")
+        default = self.scene.robot.legged.leg_default
+        self.leg_actions.assign((targets - default) / self.leg_params.action_scale)
+
+    def step(self, actions: torch.Tensor):
+        self.actions_t.copy_(actions)
+        with wp.ScopedDevice(self.wp_device):
+            wp.capture_launch(self._graph_actions)
+            if self.locomotion is not None:
+                self.leg_actions_t.copy_(torch.from_numpy(self.locomotion(self.leg_obs.numpy())))
+            wp.capture_launch(self._graph)
+        return self._step_result()

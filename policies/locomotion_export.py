@@ -5,8 +5,8 @@
 output ``actions`` [1, 12] float32, the deterministic mean before the environment's clip. Leg targets
 ``default + action_scale * actions`` in ``LEG_JOINT_NAMES`` order. The metadata holds the runtime's
 :class:`~dynpush.runtime.config.OnnxLocomotionConfig` fields (checked by the runtime at start-up) plus the
-command limits, PD gains, control period and training config, and :func:`runtime_config` turns a file back
-into the runtime's config section.
+command limits, joint limits, PD gains, control period and training config;
+``dynpush.runtime.locomotion.read_locomotion_contract`` turns a file back into the runtime's config section.
 """
 
 from __future__ import annotations
@@ -14,14 +14,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import onnx
-
 from dynpush.assets_usd import LEG_JOINT_NAMES
 from dynpush.kernels.locomotion import NUM_LEG_JOINTS, NUM_POLICY_OBS, POLICY_TERMS
 from dynpush.runtime.config import LocomotionTerm, OnnxLocomotionConfig
 from dynpush.runtime.locomotion import LOCOMOTION_CONTRACT_KEY, locomotion_contract
 
-from .export import config_sha256, load_actor, load_run_config, read_metadata, resolve_checkpoint, write_onnx
+from .export import config_sha256, load_actor, load_run_config, resolve_checkpoint, write_onnx
 from .locomotion_train import LocomotionTrainConfig
 
 
@@ -61,6 +59,8 @@ def export_locomotion(run_dir: Path, checkpoint: str | None = None, out: Path | 
         joint_stiffness=robot.leg_stiffness.tolist(),
         joint_damping=robot.leg_damping.tolist(),
         joint_effort_limit=robot.leg_effort_limit.tolist(),
+        joint_lower=robot.leg_lower.tolist(),
+        joint_upper=robot.leg_upper.tolist(),
         checkpoint=checkpoint_path.name,
         training_config=training_config,
         training_config_sha256=config_sha256(training_config),
@@ -69,15 +69,3 @@ def export_locomotion(run_dir: Path, checkpoint: str | None = None, out: Path | 
     write_onnx(actor, out, metadata,
                f"dynpush locomotion policy from {run_dir.name}/{checkpoint_path.name}; contract in metadata_props")
     return out
-
-
-def runtime_config(path: Path) -> OnnxLocomotionConfig:
-    """The runtime's ``locomotion.onnx`` section read back from an exported file's contract."""
-    contract = json.loads(read_metadata(onnx.load(str(path)))[LOCOMOTION_CONTRACT_KEY])
-    return OnnxLocomotionConfig(
-        path=str(path),
-        observation=[LocomotionTerm(name=t["name"], scale=t["scale"]) for t in contract["observation"]],
-        joint_names=contract["joint_names"],
-        default_joint_positions=contract["default_joint_positions"],
-        action_scale=contract["action_scale"],
-    )

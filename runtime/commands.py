@@ -62,7 +62,10 @@ def _sim2sim(args: argparse.Namespace) -> int:
     options = SimToSimOptions(policy=args.policy, episodes=args.episodes, mocap_noise_m=args.mocap_noise,
                               mocap_noise_rad=args.mocap_noise_rad, latency_s=args.latency, drop=args.drop,
                               lockstep=args.lockstep, seed=args.seed, config=args.config, overrides=args.set or [],
-                              log_dir=args.log_dir, trajectory_png=args.png)
+                              log_dir=args.log_dir, trajectory_png=args.png,
+                              locomotion_policy=args.locomotion_policy if args.locomotion == "onnx" else None)
+    if args.locomotion == "onnx" and not args.locomotion_policy:
+        return _fail(RuntimeConfigError("--locomotion onnx needs --locomotion-policy PATH (locomotion.onnx of dynpush export)"))
     try:
         report = run_sim2sim(options)
     except (RuntimeConfigError, StartupError) as error:
@@ -135,6 +138,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--log-dir", default="runs/sim2sim", help="folder of the runtime's tick log")
     p.add_argument("--out", default=None, help="also write the report to this JSON file")
     p.add_argument("--png", default=None, help="top-down picture of the episodes' paths (as dynpush play draws them)")
+    p.add_argument("--locomotion", choices=("onboard", "onnx"), default="onboard",
+                   help="onboard: the simulator's tracked base takes the 6D command; onnx: the runtime runs"
+                        " --locomotion-policy and sends 17 joint targets to a legged simulated robot")
+    p.add_argument("--locomotion-policy", default=None, metavar="ONNX", help="locomotion.onnx (dynpush export of a locomotion run)")
     p.set_defaults(func=_sim2sim)
 
     p = subparsers.add_parser("demo", help="the shipped policy through the runtime against the simulator (offline)")

@@ -25,7 +25,7 @@ import json
 
 import numpy as np
 
-from .config import LOCOMOTION_TERMS, NUM_LEG_JOINTS, OnnxLocomotionConfig
+from .config import LOCOMOTION_TERMS, NUM_LEG_JOINTS, LocomotionTerm, OnnxLocomotionConfig
 from .contract import PolicyContract
 from .errors import StartupError
 from .observation import quat_to_matrix
@@ -46,6 +46,32 @@ def locomotion_contract(cfg: OnnxLocomotionConfig, **extra) -> dict[str, str]:
         **extra,
     }
     return {LOCOMOTION_CONTRACT_KEY: json.dumps(contract)}
+
+
+def read_locomotion_contract(path: str) -> tuple[OnnxLocomotionConfig, dict]:
+    """The runtime's ``locomotion.onnx`` section of an exported file (``dynpush export`` of a locomotion run) and
+    its whole contract (command limits, joint limits, gains, training config)."""
+    import onnxruntime as ort
+
+    try:
+        metadata = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).get_modelmeta().custom_metadata_map
+    except Exception as error:  # onnxruntime raises its own exception types for unreadable models
+        raise StartupError(f"locomotion.onnx: cannot load {path}: {error}") from error
+    if LOCOMOTION_CONTRACT_KEY not in metadata:
+        raise StartupError(f"{path} has no {LOCOMOTION_CONTRACT_KEY} metadata: not exported by dynpush from a locomotion run")
+    contract = json.loads(metadata[LOCOMOTION_CONTRACT_KEY])
+    missing = sorted({"observation", "joint_names", "default_joint_positions", "action_scale", "joint_lower",
+                      "joint_upper"} - set(contract))
+    if missing:
+        raise StartupError(f"{path}: {LOCOMOTION_CONTRACT_KEY} lacks {missing}; export the run again with this dynpush")
+    section = OnnxLocomotionConfig(
+        path=str(path),
+        observation=[LocomotionTerm(name=t["name"], scale=float(t["scale"])) for t in contract["observation"]],
+        joint_names=list(contract["joint_names"]),
+        default_joint_positions=[float(v) for v in contract["default_joint_positions"]],
+        action_scale=float(contract["action_scale"]),
+    )
+    return section, contract
 
 
 def check_locomotion_contract(metadata: dict[str, str], cfg: OnnxLocomotionConfig) -> None:

@@ -5,8 +5,14 @@ This process runs :class:`~dynpush.runtime.app.Runtime` (numpy + onnxruntime onl
 mocap system over loopback UDP. The runtime's config is the given one (or the defaults) with the
 parts that wire it to the simulator replaced: mocap source ``udp`` on an ephemeral loopback port with
 bodies ``base`` and ``object`` in the runtime's conventions, the robot link on an ephemeral port
-replying to the simulator, goals from ``DPG1`` commands only, onboard locomotion (the simulator's
-tracked base takes the 6D command), and the clock (real time by default, lock-step on request).
+replying to the simulator, goals from ``DPG1`` commands only, the locomotion and the clock (real time by
+default, lock-step on request).
+
+Locomotion: ``onboard`` (default), the simulator's tracked base takes the 6D command; or a locomotion ONNX
+(``locomotion_policy``, exported from a ``dynpush train --task locomotion`` run): this runtime runs it, as it
+would on the robot, and sends all 17 joint targets (12 legs, 5 arm) to the simulator's legged robot
+(``env.legged.enabled``), which reports its leg joints back. The runtime's ``locomotion.onnx`` section, leg
+joint names and safety leg limits come from the file's contract.
 
 The report (JSON) gives the success rate over the episodes (success flag at an episode's last
 step), the episodes, the simulated conditions and the runtime's own summary (timing, states, drops).
@@ -23,6 +29,7 @@ from pathlib import Path
 
 from .app import Runtime
 from .config import GoalsConfig, MocapConfig, RuntimeConfig, RuntimeConfigError, load_config
+from .locomotion import read_locomotion_contract
 
 EVENT_PREFIX = "SIM2SIM "
 
@@ -41,6 +48,7 @@ class SimToSimOptions:
     overrides: list[str] = field(default_factory=list)  # simulator environment overrides, env.field=value
     log_dir: str = "runs/sim2sim"
     trajectory_png: str | None = None  # the simulator draws the episodes' paths here
+    locomotion_policy: str | None = None  # locomotion.onnx: the runtime runs it, the simulator is legged
 
     def validate(self) -> None:
         if self.episodes < 1:
@@ -57,9 +65,15 @@ def runtime_config(options: SimToSimOptions) -> RuntimeConfig:
     policy = str(Path(options.policy).resolve())
     cfg = load_config(options.config, {"push_policy": {"path": policy}}) if options.config else RuntimeConfig()
     if cfg.locomotion.mode != "onboard":
-        raise RuntimeConfigError("locomotion.mode must be 'onboard' for sim2sim (the simulator's tracked base takes"
-                                 f" the 6D command), got {cfg.locomotion.mode!r}")
+        raise RuntimeConfigError("locomotion.mode must be 'onboard' in a sim2sim config; a locomotion ONNX is given as"
+                                 f" sim2sim's locomotion_policy (--locomotion onnx), got {cfg.locomotion.mode!r}")
     cfg.push_policy.path = policy
+    if options.locomotion_policy:
+        section, contract = read_locomotion_contract(str(Path(options.locomotion_policy).resolve()))
+        cfg.locomotion.mode, cfg.locomotion.onnx = "onnx", section
+        cfg.robot.leg_joint_names = list(section.joint_names)
+        cfg.safety.leg_joint_lower = [float(v) for v in contract["joint_lower"]]
+        cfg.safety.leg_joint_upper = [float(v) for v in contract["joint_upper"]]
     cfg.mocap = MocapConfig(source="udp", port=0, timeout_s=cfg.mocap.timeout_s)
     cfg.robot.bind_address, cfg.robot.port, cfg.robot.robot_address = "127.0.0.1", 0, ""
     cfg.goals = GoalsConfig(command_port=0)
@@ -76,7 +90,8 @@ def _simulator_config(options: SimToSimOptions, runtime: Runtime) -> dict:
         "goal_port": runtime.goals.endpoint.port, "episodes": options.episodes, "mocap_noise_m": options.mocap_noise_m,
         "mocap_noise_rad": options.mocap_noise_rad, "latency_s": options.latency_s, "drop": options.drop,
         "lockstep": options.lockstep, "seed": options.seed, "base_body": mocap.base_body,
-        "object_body": mocap.object_body, "overrides": list(options.overrides),
+        "object_body": mocap.object_body,
+        "overrides": list(options.overrides) + (["env.legged.enabled=True"] if options.locomotion_policy else []),
         "trajectory_png": str(Path(options.trajectory_png).resolve()) if options.trajectory_png else None,
     }
 
@@ -124,7 +139,8 @@ def run_sim2sim(options: SimToSimOptions) -> dict:
         "toppled_rate": rate("toppled"),
         "completed": bool(done) and count == options.episodes,
         "simulator_exit_code": process.returncode,
-        "conditions": {"clock": "lockstep" if options.lockstep else "realtime", "mocap_noise_m": options.mocap_noise_m,
+        "conditions": {"clock": "lockstep" if options.lockstep else "realtime",
+                       "locomotion": options.locomotion_policy or "onboard (tracked base)", "mocap_noise_m": options.mocap_noise_m,
                        "mocap_noise_rad": options.mocap_noise_rad, "latency_s": options.latency_s,
                        "drop": options.drop, "seed": options.seed, "overrides": options.overrides},
         "episode_results": episodes,

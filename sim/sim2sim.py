@@ -15,7 +15,11 @@ with the runtime's own datagrams (``dynpush.runtime.packets``):
   ``latency_s`` later, rounded to whole control steps.
 - **robot state out** (``DPS1``), once per control step: IMU orientation = the true base orientation,
   the base twist in the base frame (of the base frame origin), the end-effector point in the base frame
-  (the arm's forward kinematics on hardware), arm joint positions and velocities; no leg joints.
+  (the arm's forward kinematics on hardware), arm joint positions and velocities; leg joint positions and
+  velocities with a legged robot (``env.legged.enabled``), none with the tracked base.
+- **legged robot** (``env.legged.enabled``, the runtime runs a locomotion ONNX): the command's 12 leg
+  targets go to the leg drives as they are (the base command is then only the push policy's, which the
+  environment ignores); before the first command, or without leg targets, the legs hold their default.
 - **goals out** (``DPG1``): the episode's goal when it starts.
 
 Episodes: the environment the policy was trained in (``policies.evaluate.env_config_for``: the
@@ -123,6 +127,8 @@ class SimRobot:
         self._body_com = scene.model.body_com.numpy()[scene.base_body[0]].astype(np.float64)
         self._arm_qd = scene.arm_qd_start[0] + np.arange(NUM_ARM_JOINTS)
         self._base_body = scene.base_body[0]
+        self.legged = self.env.cfg.legged.enabled
+        self._leg_default = scene.robot.legged.leg_default if self.legged else None
         c = self.contract
         self._base_default = np.asarray(c.base_command_default)
         self._base_scale = np.asarray(c.base_command_scale)
@@ -154,6 +160,9 @@ class SimRobot:
         else:
             a[:6] = (command.base_command - self._base_default) / self._base_scale
             a[6:] = (command.arm_targets - self._arm_default) / self._arm_scale
+        if self.legged:
+            given = command is not None and len(command.leg_targets) == len(self._leg_default)
+            self.env.set_leg_targets((command.leg_targets if given else self._leg_default)[None])
         return torch.as_tensor(a, dtype=torch.float32)[None]
 
     # ------------------------------------------------------------------ measurements -> datagrams
@@ -166,12 +175,14 @@ class SimRobot:
         R_b = quat_to_matrix(q_b)
         qd = self.env.state_0.body_qd.numpy()[self._base_body].astype(np.float64)  # CoM velocity, angular velocity
         v_origin = qd[:3] + np.cross(qd[3:], p_b - (p_b + R_b @ self._body_com))
-        joint_qd = self.env.state_0.joint_qd.numpy()
+        joint_q, joint_qd = self.env.state_0.joint_q.numpy(), self.env.state_0.joint_qd.numpy()
+        leg_q = joint_q[self.env.scene.leg_q[0]].astype(np.float64) if self.legged else np.zeros(0)
+        leg_qd = joint_qd[self.env.scene.leg_qd[0]].astype(np.float64) if self.legged else np.zeros(0)
         return Proprioception(
             seq=self._seq, stamp_s=self.step * self.dt, base_quat_xyzw=q_b, base_linear_velocity_b=R_b.T @ v_origin,
             base_angular_velocity_b=R_b.T @ qd[3:], ee_position_b=R_b.T @ (self.probe.ee_position()[0] - p_b),
             arm_q=self.probe.arm_q()[0], arm_qd=joint_qd[self._arm_qd].astype(np.float64),
-            leg_q=np.zeros(0), leg_qd=np.zeros(0),
+            leg_q=leg_q, leg_qd=leg_qd,
         )
 
     def _measured(self, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -295,6 +295,7 @@ class LocomotionEnv(VecEnv):
         arrays["model.body_mass"] = self.scene.model.body_mass
         arrays["model.body_inv_mass"] = self.scene.model.body_inv_mass
         arrays["policy_obs"], arrays["critic_obs"] = self.policy_obs, self.critic_obs
+        arrays["mujoco.qacc_warmstart"] = self.solver.mjw_data.qacc_warmstart  # the solver starts from it
         return arrays
 
     def state_dict(self) -> dict[str, np.ndarray]:
@@ -308,8 +309,9 @@ class LocomotionEnv(VecEnv):
         if missing:
             return f"environment state lacks {sorted(missing)}"
         for name, array in arrays.items():
-            if tuple(state[name].shape) != tuple(array.shape):
-                return f"environment state {name!r} has shape {state[name].shape}, expected {array.shape} (same num_envs required)"
+            shape = array.numpy().shape
+            if tuple(state[name].shape) != shape:
+                return f"environment state {name!r} has shape {state[name].shape}, expected {shape} (same num_envs required)"
         return None
 
     def load_state_dict(self, state: dict[str, np.ndarray]) -> None:

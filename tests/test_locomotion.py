@@ -1,0 +1,175 @@
+"""Locomotion task (issue 8) end to end: a tiny CaT-PPO run -> locomotion.onnx (parity, contract) -> the runtime's
+locomotion (its numpy observation equals the Warp kernel's) -> the legged push environment (the network in the
+loop, simulated leg torques as constraints) -> sim2sim with the runtime running the locomotion ONNX."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from dynpush.assets_usd import LEG_JOINT_NAMES
+from dynpush.cli import main
+from dynpush.kernels import locomotion as loco
+from dynpush.policies.export import load_actor, load_run_config
+from dynpush.policies.locomotion_export import export_locomotion
+from dynpush.policies.locomotion_train import LocomotionTrainConfig
+from dynpush.policies.train import train
+from dynpush.runtime.errors import StartupError
+from dynpush.runtime.locomotion import OnnxLocomotion, read_locomotion_contract
+from dynpush.runtime.packets import Proprioception
+from dynpush.runtime.tick_log import read_log
+from dynpush.sim.config import LeggedModeConfig, PushEnvConfig
+from dynpush.sim.legged_push_env import LEG_TORQUE_COLUMN
+from dynpush.sim.locomotion_config import LocomotionEnvConfig, LocomotionNoiseConfig
+from dynpush.sim.locomotion_env import LocomotionEnv
+from dynpush.sim.push_env import make_push_env
+from test_export import observations, torch_actions
+from test_runtime_helpers import write_policy
+
+
+@pytest.fixture(scope="module")
+def robot_contract():
+    """The push policy contract ``dynpush export`` writes for the robot (arm defaults of robot.usda)."""
+    from dynpush.policies.export import build_contract
+    from dynpush.policies.train import TrainConfig
+
+    return build_contract(TrainConfig.preset_config("cpu"))
+
+
+@pytest.fixture(scope="module")
+def locomotion_run(tmp_path_factory):
+    """Two CaT-PPO iterations on 16 legged worlds with small networks, exported to locomotion.onnx."""
+    run = tmp_path_factory.mktemp("locomotion") / "run"
+    cfg = LocomotionTrainConfig(env=LocomotionEnvConfig(num_envs=16), iterations=2, num_steps_per_env=8, save_interval=1)
+    cfg.network = dataclasses.replace(cfg.network, actor_hidden=(32, 16), critic_hidden=(32, 16))
+    torch.manual_seed(0)
+    train(cfg, run)
+    return run, export_locomotion(run)
+
+
+def test_locomotion_onnx_equals_the_actor_and_carries_its_contract(locomotion_run, robot_contract):
+    run, path = locomotion_run
+    cfg = load_run_config(run)
+    assert isinstance(cfg, LocomotionTrainConfig) and (run / "model_1.pt").exists()
+    actor = load_actor(run / "model_1.pt", cfg, loco.NUM_POLICY_OBS, loco.NUM_LEG_JOINTS)
+    assert int(actor.obs_normalizer.count) > 0
+    obs = observations(actor, 16, seed=2)
+    section, contract_ = read_locomotion_contract(str(path))
+    runtime = OnnxLocomotion(section, robot_contract)
+    for o, expected in zip(obs, torch_actions(actor, obs)):
+        runtime.model.input[0] = o
+        assert np.abs(runtime.model.run() - expected).max() < 1e-5
+    assert [t.name for t in section.observation] == [name for name, _ in loco.POLICY_TERMS]
+    assert section.joint_names == list(LEG_JOINT_NAMES) and section.action_scale == cfg.env.action_scale
+    assert contract_["command_lower"] == list(cfg.env.commands.lower) and len(contract_["joint_lower"]) == 12
+
+
+def test_runtime_refuses_a_config_that_disagrees_with_the_contract(locomotion_run, robot_contract):
+    _, path = locomotion_run
+    section, _ = read_locomotion_contract(str(path))
+    swapped = dataclasses.replace(section, joint_names=[section.joint_names[1], section.joint_names[0], *section.joint_names[2:]])
+    with pytest.raises(StartupError, match=r"locomotion.onnx.joint_names"):
+        OnnxLocomotion(swapped, robot_contract)
+    with pytest.raises(StartupError, match=r"locomotion.onnx.action_scale: config has 0.25"):
+        OnnxLocomotion(dataclasses.replace(section, action_scale=0.25), robot_contract)
+
+
+def test_runtime_observation_equals_the_warp_kernel(locomotion_run, robot_contract):
+    """The runtime builds the locomotion observation from measured quantities; on the same states it must equal
+    the environment's (noise off), term by term."""
+    _, path = locomotion_run
+    env = LocomotionEnv(LocomotionEnvConfig(num_envs=4, seed=3, noise=LocomotionNoiseConfig(enabled=False)))
+    torch.manual_seed(1)
+    for _ in range(30):
+        env.step(0.5 * torch.randn(4, 12))
+    runtime = OnnxLocomotion(read_locomotion_contract(str(path))[0], robot_contract)
+    scene = env.scene
+    body_q, body_qd = env.state_0.body_q.numpy(), env.state_0.body_qd.numpy()
+    joint_q, joint_qd = env.state_0.joint_q.numpy(), env.state_0.joint_qd.numpy()
+    for w in range(4):
+        quat = body_q[scene.base_body[w], 3:].astype(np.float64)
+        x, y, z, s = quat
+        R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - s * z), 2 * (x * z + s * y)],
+                      [2 * (x * y + s * z), 1 - 2 * (x * x + z * z), 2 * (y * z - s * x)],
+                      [2 * (x * z - s * y), 2 * (y * z + s * x), 1 - 2 * (x * x + y * y)]])
+        twist = body_qd[scene.base_body[w]].astype(np.float64)
+        state = Proprioception(seq=0, stamp_s=0.0, base_quat_xyzw=quat, base_linear_velocity_b=R.T @ twist[:3],
+                               base_angular_velocity_b=R.T @ twist[3:], ee_position_b=np.zeros(3),
+                               arm_q=joint_q[scene.arm_q[w, :5]].astype(np.float64),
+                               arm_qd=joint_qd[scene.arm_qd[w, :5]].astype(np.float64),
+                               leg_q=joint_q[scene.leg_q[w]].astype(np.float64), leg_qd=joint_qd[scene.leg_qd[w]].astype(np.float64))
+        runtime.last_actions = env.task.actions.numpy()[w].astype(np.float64)
+        runtime.step(state, env.task.command.numpy()[w].astype(np.float64))
+        start = 0
+        for name, size in loco.POLICY_TERMS:
+            np.testing.assert_allclose(runtime.model.input[0, start:start + size], env.policy_obs_t[w, start:start + size].numpy(),
+                                       rtol=1e-5, atol=1e-5, err_msg=f"world {w}: {name}")
+            start += size
+
+
+def test_locomotion_env_state_round_trip():
+    """state_dict / load_state_dict continue the simulation exactly (resumed training)."""
+    env = LocomotionEnv(LocomotionEnvConfig(num_envs=4, seed=5))
+    torch.manual_seed(0)
+    actions = [torch.randn(4, 12) for _ in range(10)]
+    for a in actions[:5]:
+        env.step(a)
+    saved = env.state_dict()
+    first = [env.step(a)[0]["critic"].clone() for a in actions[5:]]
+    env.load_state_dict(saved)
+    again = [env.step(a)[0]["critic"].clone() for a in actions[5:]]
+    for a, b in zip(first, again):
+        torch.testing.assert_close(a, b)
+    assert env.constraints_t.shape == (4, loco.NUM_CONSTRAINTS)
+    with pytest.raises(ValueError, match="same num_envs"):
+        env.load_state_dict({**saved, "task.command": np.zeros((5, 6), np.float32)})
+
+
+def test_legged_push_env_runs_the_locomotion_policy_and_constrains_simulated_leg_torques(locomotion_run):
+    _, path = locomotion_run
+    env = make_push_env(PushEnvConfig(num_envs=2, seed=1, legged=LeggedModeConfig(enabled=True, locomotion_policy=str(path))))
+    session = type(env.locomotion)(str(path))
+    actions = torch.zeros(2, 11)
+    actions[:, 0] = 0.5
+    for _ in range(6):
+        env.step(actions)
+    # leg_obs: the locomotion observation the step's network ran on (taken after the push actions, before physics)
+    expected = np.clip(session(env.leg_obs.numpy()), -env.cfg.actions.clip, env.cfg.actions.clip)
+    np.testing.assert_allclose(env.leg_task.actions.numpy(), expected, rtol=1e-5, atol=1e-5,
+                               err_msg="the leg actions are the locomotion network's on the observation of the step")
+    np.testing.assert_allclose(env.leg_obs.numpy()[:, 9:15], env.task.base_command.numpy(), atol=0,
+                               err_msg="the locomotion command is the push policy's base command")
+    # The leg-torque columns hold the simulated PD torques: k_p (q* - q) - k_d qd, clipped, minus the nominal.
+    legs = env.scene.robot.legged
+    q, qd = env.state_0.joint_q.numpy()[env.scene.leg_q], env.state_0.joint_qd.numpy()[env.scene.leg_qd]
+    tau = np.clip(legs.leg_stiffness * (env.leg_task.leg_target.numpy() - q) - legs.leg_damping * qd,
+                  -legs.leg_effort_limit, legs.leg_effort_limit)
+    np.testing.assert_allclose(env.constraints_t[:, LEG_TORQUE_COLUMN:LEG_TORQUE_COLUMN + 12].numpy(),
+                               np.abs(tau) - np.tile(env.cfg.constraints.leg_nominal_torque, 4), rtol=1e-4, atol=1e-3)
+    with pytest.raises(RuntimeError, match="runs its own locomotion policy"):
+        env.set_leg_targets(np.zeros((2, 12)))
+
+
+def test_sim2sim_with_the_runtime_running_the_locomotion_onnx(locomotion_run, robot_contract, tmp_path):
+    """``dynpush sim2sim --locomotion onnx``: the runtime runs both networks and sends 17 joint targets; the legged
+    simulator applies the leg targets and reports its leg joints, which the next locomotion observation uses."""
+    _, path = locomotion_run
+    push = write_policy(tmp_path / "push.onnx", robot_contract)
+    config = tmp_path / "runtime.yaml"
+    config.write_text(json.dumps({"safety": {"arm_ramp_s": 0.2, "max_tilt_deg": 80.0}}))
+    out = tmp_path / "report.json"
+    main(["sim2sim", str(push), "--episodes", "1", "--lockstep", "--config", str(config), "--locomotion", "onnx",
+          "--locomotion-policy", str(path), "--set", "env.episode_length_s=0.5", "--log-dir", str(tmp_path / "logs"),
+          "--out", str(out)])
+    report = json.loads(out.read_text())
+    assert report["simulator_exit_code"] == 0 and report["conditions"]["locomotion"] == str(path)
+    log = read_log(report["runtime"]["log"])
+    obs, targets = log.column("locomotion_obs"), log.column("leg_targets")
+    assert len(obs) >= 20 and np.isfinite(obs).all() and np.isfinite(targets).all()
+    leg_q = obs[:, 15:27]  # leg_joint_position: q - default, as the simulator reported q
+    assert np.abs(leg_q).max() > 1e-3 and np.ptp(leg_q, axis=0).max() > 1e-3, "the simulator's leg joints reach the runtime"
+    section, _ = read_locomotion_contract(str(path))
+    np.testing.assert_allclose(targets, section.default_joint_positions + section.action_scale * log.column("locomotion_actions"),
+                               atol=1e-5)

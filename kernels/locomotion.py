@@ -51,6 +51,7 @@ CONSTRAINT_GROUPS = (
 NUM_CONSTRAINTS = sum(size for _, size in CONSTRAINT_GROUPS)
 REWARD_TERMS = ("linear_velocity", "yaw_rate", "attitude", "height")
 vec12 = wp.types.vector(length=NUM_LEG_JOINTS, dtype=float)
+vec6 = wp.types.vector(length=NUM_COMMANDS, dtype=float)
 
 
 @wp.struct
@@ -348,9 +349,11 @@ def compute_rewards(
     params: LocomotionRewardParams,
     reward: wp.array(dtype=float),
     reward_terms: wp.array2d(dtype=float),
+    tracking_error: wp.array2d(dtype=float),
 ):
     """Tracking rewards of the 6D command: ``w_i exp(-e_i^2 / sigma_i)`` for the heading-frame velocity
-    (vx, vy), the yaw rate, the attitude (roll, pitch) and the base height."""
+    (vx, vy), the yaw rate, the attitude (roll, pitch) and the base height. ``tracking_error`` (N, 6): the
+    errors ``command - measured`` per component (vx, vy, yaw rate, roll, pitch, height)."""
     w = wp.tid()
     x_b = view.body_q[view.base_body[w]]
     q_b = wp.transform_get_rotation(x_b)
@@ -360,6 +363,9 @@ def compute_rewards(
     e_yaw = task.command[w, 2] - velocity[2]
     e_att = wp.vec2(task.command[w, 3] - roll_pitch[0], task.command[w, 4] - roll_pitch[1])
     e_h = task.command[w, 5] - wp.transform_get_translation(x_b)[2]
+    errors = vec6(e_v[0], e_v[1], e_yaw, e_att[0], e_att[1], e_h)
+    for i in range(NUM_COMMANDS):
+        tracking_error[w, i] = errors[i]
     terms = wp.vec4(
         wp.exp(-wp.dot(e_v, e_v) / params.sigma_linear_velocity),
         wp.exp(-e_yaw * e_yaw / params.sigma_yaw_rate),

@@ -11,6 +11,7 @@ modes (one at a time):
   (default)          Tables I and II: --episodes first episodes -> eval.json, eval.png
   --scenario FILE    objects through goal sequences (scenarios/*.yaml) -> scenario.json, scenario.png
   --footprints       EE height vs object footprint (Fig. "EE height boxplot") -> footprints.json, footprints.png
+  a locomotion.onnx  command tracking per component -> locomotion_eval.json, locomotion_eval.png
 
 Table I ablations are separate trainings evaluated the same way, e.g.
   dynpush train --name no_balance --set "disabled_constraint_groups=('object_balance',)"
@@ -37,8 +38,33 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _is_locomotion_policy(path: Path) -> bool:
+    import onnx
+
+    from dynpush.runtime.locomotion import LOCOMOTION_CONTRACT_KEY
+
+    from .export import read_metadata
+
+    return path.exists() and LOCOMOTION_CONTRACT_KEY in read_metadata(onnx.load(str(path), load_external_data=False))
+
+
+def _eval_locomotion(args: argparse.Namespace) -> int:
+    from .locomotion_eval import LocomotionEvalConfig, evaluate_locomotion
+
+    policy = Path(args.policy)
+    cfg = LocomotionEvalConfig(num_envs=args.num_envs or 256, seconds=args.seconds, seed=args.seed, noise=args.noise)
+    out = Path(args.out) if args.out else policy.parent / "locomotion_eval"
+    result = evaluate_locomotion(policy, cfg, out)
+    print("tracking RMS error: " + ", ".join(f"{name} {value:.3f} {result['units'][name]}"
+                                            for name, value in result["tracking_rms"].items()) + f"; fell {result['fell_percent']:.1f} %")
+    print(f"wrote {out / 'locomotion_eval.json'} and {out / 'locomotion_eval.png'}")
+    return 0
+
+
 def _eval(args: argparse.Namespace) -> int:
     policy = Path(args.policy)
+    if _is_locomotion_policy(policy):
+        return _eval_locomotion(args)
     overrides = tuple(args.set or ())
     if args.scenario:
         from .scenarios import load_scenario, run_scenario
@@ -148,6 +174,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     mode.add_argument("--scenario", default=None, metavar="FILE", help="scenario YAML (objects and goal sequences)")
     mode.add_argument("--footprints", action="store_true", help="EE height vs object footprint study")
     p.add_argument("--footprint-episodes", type=int, default=1000, help="successful episodes per footprint")
+    p.add_argument("--seconds", type=float, default=10.0,
+                   help="locomotion.onnx: seconds each world holds its command (--num-envs worlds, default 256)")
     p.set_defaults(func=_eval)
 
     p = subparsers.add_parser("play", help="roll out a few episodes: top-down PNG, optionally a USD animation")

@@ -95,6 +95,7 @@ class LocomotionEnv(VecEnv):
         self.critic_obs = wp.zeros((n, k.NUM_CRITIC_OBS), dtype=float)
         self.reward = wp.zeros(n, dtype=float)
         self.reward_terms = wp.zeros((n, len(REWARD_TERMS)), dtype=float)
+        self.tracking_error = wp.zeros((n, k.NUM_COMMANDS), dtype=float)
         self.constraints = wp.zeros((n, k.NUM_CONSTRAINTS), dtype=float)
         self.reset_flags = wp.zeros(n, dtype=int)
         self.time_out = wp.zeros(n, dtype=int)
@@ -104,6 +105,7 @@ class LocomotionEnv(VecEnv):
         self.actions_t = t(self.raw_actions)
         self.policy_obs_t, self.critic_obs_t = t(self.policy_obs), t(self.critic_obs)
         self.reward_t, self.reward_terms_t = t(self.reward), t(self.reward_terms)
+        self.tracking_error_t = t(self.tracking_error)  # (N, 6) command - measured, COMMAND_NAMES order
         self.constraints_t = t(self.constraints)
         self.reset_t, self.time_out_t = t(self.reset_flags), t(self.time_out)
         self.episode_length_buf = t(task.episode_step)
@@ -182,7 +184,8 @@ class LocomotionEnv(VecEnv):
             for name in ("body_q", "body_qd", "joint_q", "joint_qd"):
                 getattr(self.state_0, name).assign(getattr(self.state_1, name))
         self._launch(k.update_feet, [self.view, self.limits, self.task])
-        self._launch(k.compute_rewards, [self.view, self.task, self.reward_params, self.reward, self.reward_terms])
+        self._launch(k.compute_rewards, [self.view, self.task, self.reward_params, self.reward, self.reward_terms,
+                                         self.tracking_error])
         self._launch(k.compute_constraints, [self.view, self.task, self.limits, self.constraints])
         self._launch(k.compute_terminations, [self.view, self.task, self.limits, self.reset_flags, self.time_out])
         self._start_flagged()

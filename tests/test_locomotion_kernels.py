@@ -207,7 +207,8 @@ def test_compute_rewards():
     prm.sigma_linear_velocity, prm.sigma_yaw_rate, prm.sigma_attitude, prm.sigma_height = sig
     view, task = structs(view_np, task_np)
     reward, terms = wp.zeros(n, dtype=float, device=DEVICE), wp.zeros((n, 4), dtype=float, device=DEVICE)
-    launch(k.compute_rewards, n, view, task, prm, reward, terms)
+    error = wp.zeros((n, 6), dtype=float, device=DEVICE)
+    launch(k.compute_rewards, n, view, task, prm, reward, terms, error)
 
     x_b, qd_b, u = view_np["body_q"][base], view_np["body_qd"][base], task_np["command"]
     v_h, roll, pitch = heading(x_b[:, 3:], qd_b[:, :3])
@@ -217,6 +218,8 @@ def test_compute_rewards():
     assert (ref.std(axis=0) > 0.1 * prm.weights.numpy()).all(), "every term should vary across the random states"
     close(terms.numpy(), ref, atol=2e-5, err_msg="w_i exp(-e_i^2 / sigma_i) in REWARD_TERMS order")
     close(reward.numpy(), ref.sum(1), atol=5e-5)
+    measured = np.column_stack([v_h[:, :2], qd_b[:, 5], roll, pitch, x_b[:, 2]])
+    close(error.numpy(), u - measured, atol=2e-5, err_msg="tracking errors command - measured (vx, vy, yaw rate, roll, pitch, height)")
 
 
 # --------------------------------------------------------------------------- constraints

@@ -7,6 +7,14 @@ from .views import NUM_ACTIONS, NUM_ARM_JOINTS, NUM_BASE_COMMANDS, PushTask, Rob
 wp.set_module_options({"enable_backward": False})
 
 
+@wp.func
+def clipped_action(a: float, clip: float):
+    """A raw policy output clipped to ``+-clip``; a non-finite one counts as zero."""
+    if not wp.isfinite(a):
+        return 0.0
+    return wp.clamp(a, -clip, clip)
+
+
 @wp.kernel
 def process_actions(
     raw_actions: wp.array2d(dtype=float),
@@ -26,11 +34,8 @@ def process_actions(
     """
     w = wp.tid()
     for i in range(NUM_ACTIONS):
-        a = raw_actions[w, i]
-        if not wp.isfinite(a):
-            a = 0.0
         task.last_actions[w, i] = task.actions[w, i]
-        task.actions[w, i] = wp.clamp(a, -clip, clip)
+        task.actions[w, i] = clipped_action(raw_actions[w, i], clip)
     for i in range(NUM_BASE_COMMANDS):
         task.base_command[w, i] = base_default[i] + base_scale[i] * task.actions[w, i]
     start = robot.arm_q_start[w]

@@ -28,7 +28,9 @@ import warp as wp
 
 from dynpush.runtime.config import LOCOMOTION_TERMS
 
+from .actions import clipped_action
 from .frames import fork_rng, heading_roll_pitch, heading_yaw, next_rng, yaw_quat
+from .observations import add_noise, write_vec
 
 wp.set_module_options({"enable_backward": False})
 
@@ -307,11 +309,8 @@ def process_leg_actions(
     targets."""
     w = wp.tid()
     for j in range(NUM_LEG_JOINTS):
-        a = raw_actions[w, j]
-        if not wp.isfinite(a):
-            a = 0.0
         task.last_actions[w, j] = task.actions[w, j]
-        task.actions[w, j] = wp.clamp(a, -params.clip, params.clip)
+        task.actions[w, j] = clipped_action(raw_actions[w, j], params.clip)
         target = params.leg_default[j] + params.action_scale * task.actions[w, j]
         task.leg_target[w, j] = target
         joint_target_q[view.leg_q[w, j]] = target
@@ -447,13 +446,6 @@ def compute_terminations(
     time_out[w] = wp.where(timed_out and not fallen, 1, 0)
 
 
-@wp.func
-def write_vec3(out: wp.array2d(dtype=float), w: int, k: int, v: wp.vec3):
-    for i in range(3):
-        out[w, k + i] = v[i]
-    return k + 3
-
-
 @wp.kernel
 def compute_observations(
     view: LeggedView,
@@ -471,9 +463,9 @@ def compute_observations(
     q_b = wp.transform_get_rotation(x_b)
     qd_b = view.body_qd[view.base_body[w]]
     k = int(0)
-    k = write_vec3(critic_obs, w, k, wp.quat_rotate_inv(q_b, wp.spatial_top(qd_b)))
-    k = write_vec3(critic_obs, w, k, wp.quat_rotate_inv(q_b, wp.spatial_bottom(qd_b)))
-    k = write_vec3(critic_obs, w, k, wp.quat_rotate_inv(q_b, wp.vec3(0.0, 0.0, -1.0)))
+    k = write_vec(critic_obs, w, k, wp.quat_rotate_inv(q_b, wp.spatial_top(qd_b)))
+    k = write_vec(critic_obs, w, k, wp.quat_rotate_inv(q_b, wp.spatial_bottom(qd_b)))
+    k = write_vec(critic_obs, w, k, wp.quat_rotate_inv(q_b, wp.vec3(0.0, 0.0, -1.0)))
     for i in range(NUM_COMMANDS):
         critic_obs[w, k + i] = task.command[w, i]
     k += NUM_COMMANDS
@@ -500,9 +492,4 @@ def compute_observations(
     k += NUM_FEET
     critic_obs[w, k] = task.base_mass_offset[w]
 
-    rng = next_rng(seed, task.rng_counter, w)
-    for i in range(NUM_POLICY_OBS):
-        noise = float(0.0)
-        if noise_enabled != 0:
-            noise = wp.randf(rng, -1.0, 1.0) * noise_scale[i]
-        policy_obs[w, i] = critic_obs[w, i] + noise
+    add_noise(critic_obs, policy_obs, w, noise_scale, noise_enabled, next_rng(seed, task.rng_counter, w))

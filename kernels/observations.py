@@ -18,7 +18,7 @@ import warp as wp
 from dynpush.runtime.observation import POLICY_OBSERVATION_LAYOUT
 
 from .frames import next_rng
-from .views import EE_CONTACT, NUM_ACTIONS, NUM_ARM_JOINTS, NUM_POLICY_OBS, PushTask, RobotView
+from .views import EE_CONTACT, NUM_ACTIONS, NUM_ARM_JOINTS, PushTask, RobotView
 
 wp.set_module_options({"enable_backward": False})
 
@@ -58,6 +58,17 @@ def write_mat(out: wp.array2d(dtype=float), w: int, k: int, m: wp.mat33):
         for c in range(3):
             out[w, k + 3 * r + c] = m[r, c]
     return k + 9
+
+
+@wp.func
+def add_noise(critic_obs: wp.array2d(dtype=float), policy_obs: wp.array2d(dtype=float), w: int,
+              noise_scale: wp.array(dtype=float), noise_enabled: int, rng: wp.uint32):
+    """The actor's observation: the first ``len(noise_scale)`` critic entries plus U(-s, s) noise where enabled."""
+    for i in range(noise_scale.shape[0]):
+        noise = float(0.0)
+        if noise_enabled != 0:
+            noise = wp.randf(rng, -1.0, 1.0) * noise_scale[i]
+        policy_obs[w, i] = critic_obs[w, i] + noise
 
 
 @wp.kernel
@@ -121,9 +132,4 @@ def compute_observations(
     critic_obs[w, k] = wp.where(shape == 0, 1.0, 0.0)
     critic_obs[w, k + 1] = wp.where(shape == 1, 1.0, 0.0)
 
-    rng = next_rng(seed, task.rng_counter, w)
-    for i in range(NUM_POLICY_OBS):
-        noise = float(0.0)
-        if noise_enabled != 0:
-            noise = wp.randf(rng, -1.0, 1.0) * noise_scale[i]
-        policy_obs[w, i] = critic_obs[w, i] + noise
+    add_noise(critic_obs, policy_obs, w, noise_scale, noise_enabled, next_rng(seed, task.rng_counter, w))

@@ -17,7 +17,7 @@ from pathlib import Path
 from dynpush.assets_usd import LEG_JOINT_NAMES
 from dynpush.kernels.locomotion import NUM_LEG_JOINTS, NUM_POLICY_OBS, POLICY_TERMS
 from dynpush.runtime.config import LocomotionTerm, OnnxLocomotionConfig
-from dynpush.runtime.locomotion import LOCOMOTION_CONTRACT_KEY, locomotion_contract
+from dynpush.runtime.locomotion import locomotion_contract
 
 from .export import config_sha256, load_actor, load_run_config, resolve_checkpoint, write_onnx
 from .locomotion_train import LocomotionTrainConfig

@@ -15,7 +15,7 @@ from dynpush.kernels.locomotion import CONSTRAINT_GROUPS
 from dynpush.sim.config import ConfigError
 from dynpush.sim.locomotion_config import LocomotionEnvConfig
 
-from .train import PRESETS, NetworkConfig, PPOConfig, _from_dict
+from .train import PRESETS, NetworkConfig, PPOConfig, _from_dict, rsl_rl_runner_cfg
 
 
 def _cat_p_max() -> dict[str, tuple[float, float]]:
@@ -80,21 +80,12 @@ class LocomotionTrainConfig:
 
     def runner_cfg(self) -> dict:
         """The rsl_rl runner configuration."""
-        mlp = {"class_name": "MLPModel", "activation": "elu", "obs_normalization": True}
         return {
-            "num_steps_per_env": self.num_steps_per_env,
-            "save_interval": self.save_interval,
-            "obs_groups": {"actor": ["policy"], "critic": ["critic"]},
-            "algorithm": dataclasses.asdict(self.ppo),
-            "actor": {**mlp, "hidden_dims": list(self.network.actor_hidden),
-                      "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": self.network.init_noise_std}},
-            "critic": {**mlp, "hidden_dims": list(self.network.critic_hidden)},
+            **rsl_rl_runner_cfg(self.num_steps_per_env, self.save_interval, self.ppo, self.network),
             "schedule": {
                 "scale_with_run_length": False,
                 "reach": None,
                 "constraints": {"p_max": {name: tuple(pair) for name, pair in self.p_max.items()},
                                 "ramp_iterations": int(self.p_max_ramp_fraction * self.iterations)},
             },
-            "logger": "tensorboard",
-            "check_for_nan": True,
         }

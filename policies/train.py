@@ -128,15 +128,8 @@ class TrainConfig:
 
     def runner_cfg(self) -> dict:
         """The rsl_rl runner configuration."""
-        mlp = {"class_name": "MLPModel", "activation": "elu", "obs_normalization": True}
         return {
-            "num_steps_per_env": self.num_steps_per_env,
-            "save_interval": self.save_interval,
-            "obs_groups": {"actor": ["policy"], "critic": ["critic"]},
-            "algorithm": dataclasses.asdict(self.ppo),
-            "actor": {**mlp, "hidden_dims": list(self.network.actor_hidden),
-                      "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": self.network.init_noise_std}},
-            "critic": {**mlp, "hidden_dims": list(self.network.critic_hidden)},
+            **rsl_rl_runner_cfg(self.num_steps_per_env, self.save_interval, self.ppo, self.network),
             "schedule": {
                 "scale_with_run_length": self.scale_schedules_with_run_length,
                 "constraints": {"p_max": {**ConstraintCurriculumConfig().p_max,
@@ -145,9 +138,24 @@ class TrainConfig:
             },
             "curriculum": dataclasses.asdict(self.curriculum),
             "critic_warmup_iterations": self.critic_warmup_iterations,
-            "logger": "tensorboard",
-            "check_for_nan": True,
         }
+
+
+def rsl_rl_runner_cfg(num_steps_per_env: int, save_interval: int, ppo: PPOConfig, network: NetworkConfig) -> dict:
+    """What every task's rsl_rl runner configuration has: rollout length, PPO, asymmetric actor-critic MLPs with
+    ELU and empirical normalisation, tensorboard, NaN checks."""
+    mlp = {"class_name": "MLPModel", "activation": "elu", "obs_normalization": True}
+    return {
+        "num_steps_per_env": num_steps_per_env,
+        "save_interval": save_interval,
+        "obs_groups": {"actor": ["policy"], "critic": ["critic"]},
+        "algorithm": dataclasses.asdict(ppo),
+        "actor": {**mlp, "hidden_dims": list(network.actor_hidden),
+                  "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": network.init_noise_std}},
+        "critic": {**mlp, "hidden_dims": list(network.critic_hidden)},
+        "logger": "tensorboard",
+        "check_for_nan": True,
+    }
 
 
 def _from_dict(cls, data: dict):

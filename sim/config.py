@@ -330,16 +330,22 @@ class PushEnvConfig:
         return int(round(self.episode_length_s / self.control_dt))
 
     def validate(self) -> PushEnvConfig:
-        if not isinstance(self.num_envs, int) or self.num_envs < 1:
-            raise ConfigError(f"num_envs must be an integer >= 1, got {self.num_envs!r}")
-        if not (self.device == "cpu" or self.device.startswith("cuda")):
-            raise ConfigError(f"device must be 'cpu' or 'cuda[:N]', got {self.device!r}")
-        _check_positive("control_dt", self.control_dt)
-        _check_positive("episode_length_s", self.episode_length_s)
-        if self.max_episode_steps < 1:
-            raise ConfigError("episode_length_s must be at least one control step")
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if hasattr(value, "validate"):
-                value.validate(f.name)
-        return self
+        return validate_env(self)
+
+
+def validate_env(cfg):
+    """Checks what every environment config has (``num_envs``, ``device``, ``control_dt``, ``episode_length_s``)
+    and validates each of its sections; returns ``cfg``."""
+    if not isinstance(cfg.num_envs, int) or cfg.num_envs < 1:
+        raise ConfigError(f"num_envs must be an integer >= 1, got {cfg.num_envs!r}")
+    if not (cfg.device == "cpu" or cfg.device.startswith("cuda")):
+        raise ConfigError(f"device must be 'cpu' or 'cuda[:N]', got {cfg.device!r}")
+    _check_positive("control_dt", cfg.control_dt)
+    _check_positive("episode_length_s", cfg.episode_length_s)
+    if cfg.max_episode_steps < 1:
+        raise ConfigError("episode_length_s must be at least one control step")
+    for f in dataclasses.fields(cfg):
+        value = getattr(cfg, f.name)
+        if hasattr(value, "validate"):
+            value.validate(f.name)
+    return cfg

@@ -25,6 +25,7 @@ from dynpush.kernels.constraints import CONSTRAINT_GROUPS
 from dynpush.runtime.locomotion import LOCOMOTION_CONTRACT_KEY
 
 from .push_env import PushEnv
+from .legged_scene import legged_view, locomotion_task
 from .scene import build_scene
 
 LEG_TORQUE_COLUMN = sum(size for name, size in CONSTRAINT_GROUPS[: [n for n, _ in CONSTRAINT_GROUPS].index("leg_joint_torque")])
@@ -82,40 +83,20 @@ class LeggedPushEnv(PushEnv):
     def _make_buffers(self) -> None:
         super()._make_buffers()
         n, scene = self.num_envs, self.scene
-        i32 = lambda a: wp.array(np.asarray(a, dtype=np.int32), dtype=int)  # noqa: E731
-        i32_2d = lambda a: wp.array2d(np.asarray(a, dtype=np.int32), dtype=int)  # noqa: E731
-        view = loco.LeggedView()
-        view.body_q, view.body_qd = self.state_0.body_q, self.state_0.body_qd
-        view.joint_q, view.joint_qd = self.state_0.joint_q, self.state_0.joint_qd
-        view.base_body, view.base_q_start, view.base_qd_start = i32(scene.base_body), i32(scene.robot_q_start), i32(scene.robot_qd_start)
-        view.robot_qd_count = scene.robot_qd_count
-        view.leg_q, view.leg_qd = i32_2d(scene.leg_q), i32_2d(scene.leg_qd)
-        view.arm_q, view.arm_qd = i32_2d(scene.arm_q), i32_2d(scene.arm_qd)
-        view.shank_body = i32_2d(scene.shank_body)
-        self.leg_view = view
-        task = loco.LocomotionTask()
-        task.command = self.task.base_command  # the push policy's absolute 6D command is the locomotion command
-        for name, width in (("actions", loco.NUM_LEG_JOINTS), ("last_actions", loco.NUM_LEG_JOINTS),
-                            ("leg_target", loco.NUM_LEG_JOINTS), ("leg_velocity_last", loco.NUM_LEG_JOINTS),
-                            ("arm_target", loco.NUM_ARM_JOINTS + 1), ("foot_air_time", loco.NUM_FEET),
-                            ("touchdown_air_time", loco.NUM_FEET)):
-            setattr(task, name, wp.zeros((n, width), dtype=float))
-        task.foot_contact = wp.zeros((n, loco.NUM_FEET), dtype=int)
-        task.base_mass_offset = wp.zeros(n, dtype=float)
-        for name in ("episode_step", "next_command_step", "next_arm_step", "next_push_step", "rng_counter"):
-            setattr(task, name, wp.zeros(n, dtype=int))
-        self.leg_task = task
+        self.leg_view = legged_view(self.state_0, scene.base_body, scene.robot_q_start, scene.robot_qd_start,
+                                    scene.robot_qd_count, scene.leg_q, scene.leg_qd, scene.arm_q, scene.arm_qd, scene.shank_body)
+        # The push policy's absolute 6D command is the locomotion command.
+        self.leg_task = locomotion_task(n, command=self.task.base_command)
         self.leg_actions = wp.zeros((n, loco.NUM_LEG_JOINTS), dtype=float)
         self.leg_obs = wp.zeros((n, loco.NUM_POLICY_OBS), dtype=float)
         self.leg_critic_obs = wp.zeros((n, loco.NUM_CRITIC_OBS), dtype=float)
         self.leg_actions_t = wp.to_torch(self.leg_actions)
-        self.leg_obs_t = wp.to_torch(self.leg_obs)
 
     def _make_params(self) -> None:
         super()._make_params()
         legs = self.scene.robot.legged
         f32 = lambda a: wp.array(np.asarray(a, dtype=np.float32), dtype=float)  # noqa: E731
-        action_scale = 0.5
+        action_scale = 0.5  # external leg targets (set_leg_targets) pass through any scale unchanged
         if self.locomotion is not None:
             contract = self.locomotion.contract
             if not np.allclose(contract["default_joint_positions"], legs.leg_default, atol=1e-5):

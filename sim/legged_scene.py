@@ -15,6 +15,7 @@ import warp as wp
 from pxr import Usd
 
 from dynpush.assets_usd import ARM_JOINT_NAMES, GROUND_USD, LEG_JOINT_NAMES, ROBOT_LEGGED_USD
+from dynpush.kernels import locomotion as loco
 
 LEGS = ("LF", "RF", "LH", "RH")
 
@@ -145,3 +146,34 @@ def build_legged_scene(num_worlds: int, device: str) -> LeggedScene:
         arm_qd=qd_index(ARM_JOINT_NAMES),
         shank_body=w * bodies + np.array([body[f"{leg}_SHANK"] for leg in LEGS]),
     )
+
+
+def legged_view(state: newton.State, base_body, base_q_start, base_qd_start, robot_qd_count: int, leg_q, leg_qd, arm_q,
+                arm_qd, shank_body) -> loco.LeggedView:
+    """The kernels' view of the legged robots in ``state`` from per-world index arrays (numpy)."""
+    i32 = lambda a: wp.array(np.asarray(a, dtype=np.int32), dtype=int)  # noqa: E731
+    i32_2d = lambda a: wp.array2d(np.asarray(a, dtype=np.int32), dtype=int)  # noqa: E731
+    view = loco.LeggedView()
+    view.body_q, view.body_qd, view.joint_q, view.joint_qd = state.body_q, state.body_qd, state.joint_q, state.joint_qd
+    view.base_body, view.base_q_start, view.base_qd_start = i32(base_body), i32(base_q_start), i32(base_qd_start)
+    view.robot_qd_count = robot_qd_count
+    view.leg_q, view.leg_qd, view.arm_q, view.arm_qd = i32_2d(leg_q), i32_2d(leg_qd), i32_2d(arm_q), i32_2d(arm_qd)
+    view.shank_body = i32_2d(shank_body)
+    return view
+
+
+def locomotion_task(num_worlds: int, command: wp.array2d | None = None) -> loco.LocomotionTask:
+    """Zeroed locomotion task buffers; ``command`` (num_worlds, 6) is used as the command buffer if given."""
+    n = num_worlds
+    task = loco.LocomotionTask()
+    task.command = command if command is not None else wp.zeros((n, loco.NUM_COMMANDS), dtype=float)
+    for name, width in (("actions", loco.NUM_LEG_JOINTS), ("last_actions", loco.NUM_LEG_JOINTS),
+                        ("leg_target", loco.NUM_LEG_JOINTS), ("leg_velocity_last", loco.NUM_LEG_JOINTS),
+                        ("arm_target", loco.NUM_ARM_JOINTS + 1), ("foot_air_time", loco.NUM_FEET),
+                        ("touchdown_air_time", loco.NUM_FEET)):
+        setattr(task, name, wp.zeros((n, width), dtype=float))
+    task.foot_contact = wp.zeros((n, loco.NUM_FEET), dtype=int)
+    task.base_mass_offset = wp.zeros(n, dtype=float)
+    for name in ("episode_step", "next_command_step", "next_arm_step", "next_push_step", "rng_counter"):
+        setattr(task, name, wp.zeros(n, dtype=int))
+    return task

@@ -14,7 +14,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from .config import ConfigError, ConstraintConfig, MuJoCoConfig, RandomizationConfig, _check_positive, _check_range
+from .config import ConfigError, ConstraintConfig, MuJoCoConfig, RandomizationConfig, _check_positive, _check_range, validate_env
 
 _PUSH_CONSTRAINTS = ConstraintConfig()
 _PUSH_RANDOMIZATION = RandomizationConfig()
@@ -163,23 +163,13 @@ class LocomotionEnvConfig:
         return int(round(self.episode_length_s / self.control_dt))
 
     def validate(self) -> LocomotionEnvConfig:
-        if not isinstance(self.num_envs, int) or self.num_envs < 1:
-            raise ConfigError(f"num_envs must be an integer >= 1, got {self.num_envs!r}")
-        if not (self.device == "cpu" or self.device.startswith("cuda")):
-            raise ConfigError(f"device must be 'cpu' or 'cuda[:N]', got {self.device!r}")
-        for name in ("control_dt", "episode_length_s", "action_scale", "action_clip", "start_height", "base_min_height"):
+        for name in ("action_scale", "action_clip", "start_height", "base_min_height"):
             _check_positive(name, getattr(self, name))
         if not isinstance(self.substeps, int) or self.substeps < 1:
             raise ConfigError(f"substeps must be an integer >= 1, got {self.substeps!r}")
         if not 0.0 < self.base_tilt_deg < 180.0:
             raise ConfigError(f"base_tilt_deg must lie in (0, 180), got {self.base_tilt_deg!r}")
-        if self.max_episode_steps < 1:
-            raise ConfigError("episode_length_s must be at least one control step")
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if hasattr(value, "validate"):
-                value.validate(f.name)
-        return self
+        return validate_env(self)
 
     @property
     def base_tilt(self) -> float:

@@ -19,7 +19,8 @@ from tensordict import TensorDict
 from dynpush.kernels import locomotion as k
 from dynpush.sim.push_env import _articulation_mask
 
-from .legged_scene import build_legged_scene
+from .env_state import ConstraintEpisodeStats, EnvBase
+from .legged_scene import build_legged_scene, legged_view, locomotion_task
 from .locomotion_config import LocomotionEnvConfig
 
 wp.config.enable_backward = False
@@ -29,8 +30,10 @@ REWARD_TERMS = k.REWARD_TERMS
 COMMAND_NAMES = ("vx", "vy", "yaw_rate", "roll", "pitch", "height")
 
 
-class LocomotionEnv(VecEnv):
+class LocomotionEnv(EnvBase, VecEnv):
     """Command tracking with the legged robot; see the module docstring."""
+
+    reward_names = REWARD_TERMS
 
     def __init__(self, cfg: LocomotionEnvConfig):
         self.cfg = cfg.validate()
@@ -64,31 +67,9 @@ class LocomotionEnv(VecEnv):
     # ------------------------------------------------------------------ construction
     def _make_buffers(self) -> None:
         n, scene = self.num_envs, self.scene
-        i32 = lambda a: wp.array(np.asarray(a, dtype=np.int32), dtype=int)  # noqa: E731
-        i32_2d = lambda a: wp.array2d(np.asarray(a, dtype=np.int32), dtype=int)  # noqa: E731
-        task = k.LocomotionTask()
-        for name, width in (("command", k.NUM_COMMANDS), ("actions", k.NUM_LEG_JOINTS), ("last_actions", k.NUM_LEG_JOINTS),
-                            ("leg_target", k.NUM_LEG_JOINTS), ("leg_velocity_last", k.NUM_LEG_JOINTS),
-                            ("arm_target", k.NUM_ARM_JOINTS + 1), ("foot_air_time", k.NUM_FEET),
-                            ("touchdown_air_time", k.NUM_FEET)):
-            setattr(task, name, wp.zeros((n, width), dtype=float))
-        task.foot_contact = wp.zeros((n, k.NUM_FEET), dtype=int)
-        task.base_mass_offset = wp.zeros(n, dtype=float)
-        for name in ("episode_step", "next_command_step", "next_arm_step", "next_push_step", "rng_counter"):
-            setattr(task, name, wp.zeros(n, dtype=int))
-        self.task = task
-
-        view = k.LeggedView()
-        view.body_q, view.body_qd = self.state_0.body_q, self.state_0.body_qd
-        view.joint_q, view.joint_qd = self.state_0.joint_q, self.state_0.joint_qd
-        view.base_body = i32(scene.base_body)
-        view.base_q_start = i32(scene.base_q_start)
-        view.base_qd_start = i32(scene.base_qd_start)
-        view.robot_qd_count = scene.robot_qd_count
-        view.leg_q, view.leg_qd = i32_2d(scene.leg_q), i32_2d(scene.leg_qd)
-        view.arm_q, view.arm_qd = i32_2d(scene.arm_q), i32_2d(scene.arm_qd)
-        view.shank_body = i32_2d(scene.shank_body)
-        self.view = view
+        self.task = locomotion_task(n)
+        self.view = legged_view(self.state_0, scene.base_body, scene.base_q_start, scene.base_qd_start, scene.robot_qd_count,
+                                scene.leg_q, scene.leg_qd, scene.arm_q, scene.arm_qd, scene.shank_body)
 
         self.raw_actions = wp.zeros((n, k.NUM_LEG_JOINTS), dtype=float)
         self.policy_obs = wp.zeros((n, k.NUM_POLICY_OBS), dtype=float)
@@ -108,10 +89,8 @@ class LocomotionEnv(VecEnv):
         self.tracking_error_t = t(self.tracking_error)  # (N, 6) command - measured, COMMAND_NAMES order
         self.constraints_t = t(self.constraints)
         self.reset_t, self.time_out_t = t(self.reset_flags), t(self.time_out)
-        self.episode_length_buf = t(task.episode_step)
-        self._group_sizes = [size for _, size in CONSTRAINT_GROUPS]
-        self._violated_steps = torch.zeros(n, len(CONSTRAINT_GROUPS), device=self.constraints_t.device)
-        self._steps_in_episode = torch.zeros(n, device=self.constraints_t.device)
+        self.episode_length_buf = t(self.task.episode_step)
+        self._constraint_stats = ConstraintEpisodeStats(CONSTRAINT_GROUPS, n, self.constraints_t.device)
 
     def _make_params(self) -> None:
         cfg, robot = self.cfg, self.scene.robot
@@ -162,6 +141,7 @@ class LocomotionEnv(VecEnv):
         rp.sigma_attitude, rp.sigma_height = r.sigma_attitude, r.sigma_height
         rp.weights = f32(r.weights)
         self.reward_params = rp
+        self._reward_weights = rp.weights
 
         scales = []
         for name, size in k.POLICY_TERMS:
@@ -229,8 +209,7 @@ class LocomotionEnv(VecEnv):
                 self.task.episode_step.assign(rng.integers(0, self.max_episode_length, self.num_envs, dtype=np.int32))
             self.control.joint_target_q.assign(self.state_0.joint_q)
             self._observe()
-        self._violated_steps.zero_()
-        self._steps_in_episode.zero_()
+        self._constraint_stats.clear()
         return self.get_observations()
 
     def get_observations(self) -> TensorDict:
@@ -258,33 +237,15 @@ class LocomotionEnv(VecEnv):
             self._observe()
         return self.get_observations()
 
-    def set_reward_weight(self, name: str, value: float) -> None:
-        """Changes one reward weight (``REWARD_TERMS``)."""
-        if name not in REWARD_TERMS:
-            raise KeyError(f"reward weight name must be one of {REWARD_TERMS}, got {name!r}")
-        weights = self.reward_params.weights.numpy()
-        weights[REWARD_TERMS.index(name)] = value
-        self.reward_params.weights.assign(weights)
-
-    @property
-    def violated_groups_t(self) -> torch.Tensor:
-        """(num_envs, constraint groups) bool: a column of the group is violated this step."""
-        return torch.stack([g.any(dim=1) for g in torch.split(self.constraints_t > 0.0, self._group_sizes, dim=1)], dim=1)
-
     def _episode_log(self) -> dict[str, float | torch.Tensor]:
         """Per ended episode: fell (not timed out) and the share of steps with each constraint group violated;
         per step: the mean of each reward term."""
         log: dict[str, float | torch.Tensor] = {}
-        self._violated_steps += self.violated_groups_t
-        self._steps_in_episode += 1.0
+        self._constraint_stats.record(self.constraints_t)
         ended = self.reset_t != 0
         if bool(ended.any()):
-            fraction = self._violated_steps[ended] / self._steps_in_episode[ended, None]
-            for i, (name, _) in enumerate(CONSTRAINT_GROUPS):
-                log[f"/episode/violated/{name}"] = fraction[:, i]
+            log.update(self._constraint_stats.take(ended))
             log["/episode/fell"] = (self.time_out_t[ended] == 0).float()
-            self._violated_steps[ended] = 0.0
-            self._steps_in_episode[ended] = 0.0
         for i, name in enumerate(REWARD_TERMS):
             log[f"/reward/{name}"] = float(self.reward_terms_t[:, i].mean())
         return log
@@ -300,22 +261,6 @@ class LocomotionEnv(VecEnv):
         arrays["policy_obs"], arrays["critic_obs"] = self.policy_obs, self.critic_obs
         arrays["mujoco.qacc_warmstart"] = self.solver.mjw_data.qacc_warmstart  # the solver starts from it
         return arrays
-
-    def state_dict(self) -> dict[str, np.ndarray]:
-        """Everything needed to continue the simulation exactly (numpy copies)."""
-        return {name: array.numpy().copy() for name, array in self._state_arrays().items()}
-
-    def state_mismatch(self, state: dict[str, np.ndarray]) -> str | None:
-        """Why :meth:`load_state_dict` cannot restore ``state`` here, or None."""
-        arrays = self._state_arrays()
-        missing = set(arrays) - set(state)
-        if missing:
-            return f"environment state lacks {sorted(missing)}"
-        for name, array in arrays.items():
-            shape = array.numpy().shape
-            if tuple(state[name].shape) != shape:
-                return f"environment state {name!r} has shape {state[name].shape}, expected {shape} (same num_envs required)"
-        return None
 
     def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
         mismatch = self.state_mismatch(state)

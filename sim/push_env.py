@@ -32,6 +32,7 @@ from dynpush.kernels import (
 from dynpush.kernels.views import CONTACT_COLUMNS, NUM_ACTIONS, NUM_ARM_JOINTS, NUM_CRITIC_OBS, NUM_POLICY_OBS, PushTask, RobotView
 
 from .config import ConfigError, PushEnvConfig
+from .env_state import ConstraintEpisodeStats, EnvBase
 from .episode import EpisodeSpec
 from .scene import build_scene
 
@@ -57,8 +58,10 @@ def make_push_env(cfg: PushEnvConfig) -> PushEnv:
     return PushEnv(cfg)
 
 
-class PushEnv(VecEnv):
+class PushEnv(EnvBase, VecEnv):
     """Goal pushing with a tracked-base mobile manipulator (paper III); see the module docstring."""
+
+    reward_names = REWARD_TERMS
 
     def __init__(self, cfg: PushEnvConfig):
         self.cfg = cfg.validate()
@@ -141,6 +144,7 @@ class PushEnv(VecEnv):
             [r.task_weight, r.reach_weight, r.object_velocity_weight, r.action_rate_weight], dtype=float
         )
         self.task = task
+        self._reward_weights = task.reward_weights
 
         model = scene.model
         self.views = [self._robot_view(s) for s in (self.state_0, self.state_1)]
@@ -193,9 +197,7 @@ class PushEnv(VecEnv):
         self.success_t = t(self.success)
         self.episode_length_buf = t(task.episode_step)
         # Per-episode constraint statistics (torch glue): steps with any column of a group violated.
-        self._group_sizes = [size for _, size in CONSTRAINT_GROUPS]
-        self._violated_steps = torch.zeros(n, len(CONSTRAINT_GROUPS), device=self.constraints_t.device)
-        self._steps_in_episode = torch.zeros(n, device=self.constraints_t.device)
+        self._constraint_stats = ConstraintEpisodeStats(CONSTRAINT_GROUPS, n, self.constraints_t.device)
 
     def _robot_view(self, state: newton.State) -> RobotView:
         scene, model = self.scene, self.scene.model
@@ -438,8 +440,7 @@ class PushEnv(VecEnv):
             self._start_flagged()
             self._sync_targets_and_observe()
         started = torch.as_tensor(list(episodes), dtype=torch.long)
-        self._violated_steps[started] = 0.0
-        self._steps_in_episode[started] = 0.0
+        self._constraint_stats.clear(started)
         return self.get_observations()
 
     def set_goals(self, goals: dict[int, tuple[float, float, float]]) -> TensorDict:
@@ -488,8 +489,7 @@ class PushEnv(VecEnv):
                 rng = np.random.default_rng(self.cfg.seed)
                 self.task.episode_step.assign(rng.integers(0, self.max_episode_length, self.num_envs, dtype=np.int32))
             self._sync_targets_and_observe()
-        self._violated_steps.zero_()
-        self._steps_in_episode.zero_()
+        self._constraint_stats.clear()
         return self.get_observations()
 
     def get_observations(self) -> TensorDict:
@@ -528,22 +528,6 @@ class PushEnv(VecEnv):
         arrays["critic_obs"] = self.critic_obs
         return arrays
 
-    def state_dict(self) -> dict[str, np.ndarray]:
-        """Everything needed to continue the simulation exactly (numpy copies)."""
-        return {name: array.numpy().copy() for name, array in self._state_arrays().items()}
-
-    def state_mismatch(self, state: dict[str, np.ndarray]) -> str | None:
-        """Why :meth:`load_state_dict` cannot restore ``state`` here (missing arrays, other shapes), or None."""
-        arrays = self._state_arrays()
-        missing = set(arrays) - set(state)
-        if missing:
-            return f"environment state lacks {sorted(missing)}"
-        for name, array in arrays.items():
-            if tuple(state[name].shape) != tuple(array.numpy().shape):
-                return (f"environment state {name!r} has shape {state[name].shape}, expected {array.numpy().shape}"
-                        " (same num_envs required)")
-        return None
-
     def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
         """Restores :meth:`state_dict`: re-applies every world's episode, then the saved state."""
         mismatch = self.state_mismatch(state)
@@ -577,19 +561,6 @@ class PushEnv(VecEnv):
         self._episodes_ended = self._episodes_succeeded = 0
         return succeeded / ended if ended else None
 
-    def set_reward_weight(self, name: str, value: float) -> None:
-        """Changes one reward weight (``task``, ``reach``, ``object_velocity``, ``action_rate``)."""
-        if name not in REWARD_TERMS:
-            raise KeyError(f"reward weight name must be one of {REWARD_TERMS}, got {name!r}")
-        weights = self.task.reward_weights.numpy()
-        weights[REWARD_TERMS.index(name)] = value
-        self.task.reward_weights.assign(weights)
-
-    @property
-    def violated_groups_t(self) -> torch.Tensor:
-        """(num_envs, constraint groups) bool: a column of the group is violated (> 0) this step (Table II)."""
-        return torch.stack([g.any(dim=1) for g in torch.split(self.constraints_t > 0.0, self._group_sizes, dim=1)], dim=1)
-
     def _episode_log(self) -> dict[str, float | torch.Tensor]:
         """Metrics of the episodes that ended this step and the mean of each reward term.
 
@@ -598,15 +569,10 @@ class PushEnv(VecEnv):
         per constraint group the fraction of the episode's steps with a violated column (Table II).
         """
         log: dict[str, float | torch.Tensor] = {}
-        self._violated_steps += self.violated_groups_t
-        self._steps_in_episode += 1.0
+        self._constraint_stats.record(self.constraints_t)
         ended = self.episode_success_t >= 0
         if bool(ended.any()):
-            fraction = self._violated_steps[ended] / self._steps_in_episode[ended, None]
-            for i, (name, _) in enumerate(CONSTRAINT_GROUPS):
-                log[f"/episode/violated/{name}"] = fraction[:, i]
-            self._violated_steps[ended] = 0.0
-            self._steps_in_episode[ended] = 0.0
+            log.update(self._constraint_stats.take(ended))
             succeeded = (self.episode_success_t[ended] == 1).float()
             self._episodes_ended += int(succeeded.numel())
             self._episodes_succeeded += int(succeeded.sum())

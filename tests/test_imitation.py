@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from dynpush.policies.imitation import ImitationConfig, imitate
-from dynpush.policies.train import TrainConfig, apply_overrides, latest_checkpoint, train
+from dynpush.policies.train import TrainConfig, apply_overrides, train
 from dynpush.sim.config import ConfigError
 
 

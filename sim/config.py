@@ -8,7 +8,6 @@ config validates itself and raises :class:`ConfigError` naming the field and the
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import math
 from dataclasses import dataclass, field
 
@@ -256,8 +255,6 @@ class SimConfig:
     def validate(self, prefix: str = "sim") -> None:
         if self.solver not in SOLVERS:
             raise ConfigError(f"{prefix}.solver must be one of {SOLVERS}, got {self.solver!r}")
-        if self.solver == "mujoco" and importlib.util.find_spec("mujoco_warp") is None:
-            raise ConfigError(f"{prefix}.solver 'mujoco' needs MuJoCo-Warp: pip install -e '.[mujoco]'")
         if self.substeps < 1 or self.substeps % 2:
             raise ConfigError(f"{prefix}.substeps must be an even integer >= 2, got {self.substeps!r}")
         if self.xpbd_iterations < 1:
@@ -300,8 +297,6 @@ class LeggedModeConfig:
 
     def validate(self, prefix: str = "legged") -> None:
         self.mujoco.validate(f"{prefix}.mujoco")
-        if self.enabled and importlib.util.find_spec("mujoco_warp") is None:
-            raise ConfigError(f"{prefix}.enabled needs MuJoCo-Warp: pip install -e '.[mujoco]'")
 
 
 @dataclass

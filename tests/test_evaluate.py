@@ -57,7 +57,8 @@ def test_eval_counts_only_each_worlds_first_episode(policy, tmp_path):
                      overrides=("env.episode_length_s=0.2", "env.terminations.base_min_height=1.0"))
     result = evaluate(policy, cfg, tmp_path)
     assert result["episode_length_s"]["max"] == pytest.approx(0.02)
-    assert all(v in (0.0, 100.0) for v in result["constraint_violation_percent"].values())  # over one step
+    # One step per world: each group is violated in 0, 1, ... or 4 of the 4 counted steps.
+    assert all(min(v % 25.0, 25.0 - v % 25.0) < 1e-9 for v in result["constraint_violation_percent"].values())
     assert result["success_rate"] == 0.0 and result["toppled_rate"] == 0.0
     assert result["config"]["env"]["noise"]["enabled"] is False
     with pytest.raises(ConfigError, match="env.field=value"):

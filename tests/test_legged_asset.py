@@ -165,7 +165,6 @@ def test_legs_hold_the_base_with_gravity_compensated_targets_and_sag_without(leg
 
 @pytest.mark.slow
 def test_legs_hold_the_base_in_mujoco_warp(legged_builder):
-    pytest.importorskip("mujoco_warp", reason="pip install -e '.[mujoco]'")
     held = _stand(legged_builder, "mujoco", compensate=True)
     assert np.all(np.abs(held[-10:, 2] - 0.50) < 0.01), held[:, 2]
     assert max(_tilt_deg(q) for q in held[-10:, 3:]) < 1.0

@@ -75,7 +75,7 @@ def test_sim2sim_wiring_replaces_the_config(robot_policy, tmp_path):
         "locomotion": {"mode": "onnx", "onnx": {"path": "loco.onnx", "observation": [{"name": "base_command"}],
                                                 "joint_names": legs, "default_joint_positions": [0.0] * 12}},
         "robot": {"leg_joint_names": legs}, "safety": {"leg_joint_lower": [-1.0] * 12, "leg_joint_upper": [1.0] * 12}}))
-    with pytest.raises(RuntimeConfigError, match="locomotion.mode must be 'onboard' for sim2sim"):
+    with pytest.raises(RuntimeConfigError, match="locomotion.mode must be 'onboard' in a sim2sim config"):
         runtime_config(SimToSimOptions(policy=str(robot_policy), config=str(config)))
     with pytest.raises(RuntimeConfigError, match=r"drop must lie in \[0, 1\)"):
         SimToSimOptions(policy="p.onnx", drop=1.0).validate()

@@ -8,7 +8,6 @@ from dynpush.sim.config import PushEnvConfig, SimConfig
 from dynpush.sim.episode import EpisodeSpec
 from dynpush.sim.push_env import PushEnv
 
-pytest.importorskip("mujoco_warp", reason="pip install -e '.[mujoco]'")
 
 
 @pytest.mark.slow

@@ -51,9 +51,11 @@ CONSTRAINT_GROUPS = (
     ("foot_air_time", NUM_FEET),
 )
 NUM_CONSTRAINTS = sum(size for _, size in CONSTRAINT_GROUPS)
-REWARD_TERMS = ("linear_velocity", "yaw_rate", "attitude", "height")
+REWARD_TERMS = ("linear_velocity", "yaw_rate", "attitude", "height", "feet_air_time")
 vec12 = wp.types.vector(length=NUM_LEG_JOINTS, dtype=float)
 vec6 = wp.types.vector(length=NUM_COMMANDS, dtype=float)
+NUM_REWARD_TERMS = len(REWARD_TERMS)
+reward_vec = wp.types.vector(length=NUM_REWARD_TERMS, dtype=float)
 
 
 @wp.struct
@@ -146,13 +148,15 @@ class LeggedLimits:
 
 @wp.struct
 class LocomotionRewardParams:
-    """Tracking kernels ``exp(-e^2 / sigma)`` and their weights."""
+    """Tracking kernels ``exp(-e^2 / sigma)``, the stepping reward and the weights."""
 
     sigma_linear_velocity: float  # [m^2/s^2]
     sigma_yaw_rate: float  # [rad^2/s^2]
     sigma_attitude: float  # [rad^2]
     sigma_height: float  # [m^2]
-    weights: wp.array(dtype=float)  # (4,) REWARD_TERMS order
+    air_time_target: float  # [s]
+    moving_command: float  # the stepping reward counts while |(vx, vy)| + |yaw rate| exceeds this
+    weights: wp.array(dtype=float)  # (5,) REWARD_TERMS order
 
 
 @wp.func
@@ -351,8 +355,10 @@ def compute_rewards(
     tracking_error: wp.array2d(dtype=float),
 ):
     """Tracking rewards of the 6D command: ``w_i exp(-e_i^2 / sigma_i)`` for the heading-frame velocity
-    (vx, vy), the yaw rate, the attitude (roll, pitch) and the base height. ``tracking_error`` (N, 6): the
-    errors ``command - measured`` per component (vx, vy, yaw rate, roll, pitch, height)."""
+    (vx, vy), the yaw rate, the attitude (roll, pitch) and the base height; and the stepping reward of
+    legged_gym, ``w_5 sum_feet (t_air - air_time_target)`` over the feet touching down this step, while the
+    command asks to move (a standing robot collects none). ``tracking_error`` (N, 6): the errors
+    ``command - measured`` per component (vx, vy, yaw rate, roll, pitch, height)."""
     w = wp.tid()
     x_b = view.body_q[view.base_body[w]]
     q_b = wp.transform_get_rotation(x_b)
@@ -365,14 +371,21 @@ def compute_rewards(
     errors = vec6(e_v[0], e_v[1], e_yaw, e_att[0], e_att[1], e_h)
     for i in range(NUM_COMMANDS):
         tracking_error[w, i] = errors[i]
-    terms = wp.vec4(
+    stepping = float(0.0)
+    moving = wp.length(wp.vec2(task.command[w, 0], task.command[w, 1])) + wp.abs(task.command[w, 2]) > params.moving_command
+    for f in range(NUM_FEET):
+        air = task.touchdown_air_time[w, f]
+        if moving and air >= 0.0:
+            stepping += air - params.air_time_target
+    terms = reward_vec(
         wp.exp(-wp.dot(e_v, e_v) / params.sigma_linear_velocity),
         wp.exp(-e_yaw * e_yaw / params.sigma_yaw_rate),
         wp.exp(-wp.dot(e_att, e_att) / params.sigma_attitude),
         wp.exp(-e_h * e_h / params.sigma_height),
+        stepping,
     )
     total = float(0.0)
-    for i in range(4):
+    for i in range(NUM_REWARD_TERMS):
         reward_terms[w, i] = params.weights[i] * terms[i]
         total += params.weights[i] * terms[i]
     reward[w] = total

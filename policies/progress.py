@@ -25,7 +25,7 @@ GROUP_ABBREVIATIONS = {
     "leg_action_rate": "legrate", "foot_air_time": "air",
 }
 # Reward terms on the progress line: the push task's task and reach, every locomotion tracking term.
-LINE_REWARDS = ("task", "reach", "linear_velocity", "yaw_rate", "attitude", "height")
+LINE_REWARDS = ("task", "reach", "linear_velocity", "yaw_rate", "attitude", "height", "feet_air_time")
 
 
 def iteration_summary(ep_extras: list[dict]) -> dict[str, float]:

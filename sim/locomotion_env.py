@@ -139,6 +139,7 @@ class LocomotionEnv(EnvBase, VecEnv):
         rp = k.LocomotionRewardParams()
         rp.sigma_linear_velocity, rp.sigma_yaw_rate = r.sigma_linear_velocity, r.sigma_yaw_rate
         rp.sigma_attitude, rp.sigma_height = r.sigma_attitude, r.sigma_height
+        rp.air_time_target, rp.moving_command = r.air_time_target, r.moving_command
         rp.weights = f32(r.weights)
         self.reward_params = rp
         self._reward_weights = rp.weights

@@ -123,10 +123,12 @@ def _curve(args: argparse.Namespace) -> int:
     run = Path(args.run)
     out = Path(args.out) if args.out else run / "learning_curve.png"
     config = run / "config.json"
-    paper = paper_table_i_row(json.loads(config.read_text()))[1] if config.exists() else None
+    data = json.loads(config.read_text()) if config.exists() else {}
+    paper = paper_table_i_row(data)[1] if data and data.get("task") != "locomotion" else None
     summary = plot_learning_curve(run, out, paper)
-    print(f"{summary['iterations']} iterations in {summary['hours']:.2f} h: success {summary['success_percent']:.1f} %,"
-          f" toppled {summary['toppled_percent']:.1f} % (mean of the last {SMOOTHING} iterations); wrote {out}")
+    rates = ", ".join(f"{key[:-len('_percent')]} {value:.1f} %" for key, value in summary.items() if key.endswith("_percent"))
+    print(f"{summary['iterations']} iterations in {summary['hours']:.2f} h: {rates} (mean of the last {SMOOTHING}"
+          f" iterations); wrote {out}")
     return 0
 
 

@@ -161,14 +161,15 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
             out[i] = np.nanmean(window) if np.isfinite(window).any() else np.nan
         return out
 
-    success, toppled = smooth(100.0 * series("/episode/success")), smooth(100.0 * series("/episode/toppled"))
+    episode_keys = [k for k in dict.fromkeys(k for r in records for k in r) if k.startswith("/episode/") and k.count("/") == 2]
+    rates = {k.rsplit("/", 1)[-1]: smooth(100.0 * series(k)) for k in episode_keys}  # success, toppled; locomotion: fell
+    colors = {"success": "tab:green", "toppled": "tab:red", "fell": "tab:brown"}
     difficulty = series("/curriculum/goal_difficulty")
     fig = Figure(figsize=(8.0, 7.5 if records else 3.5), layout="constrained")
     axes = list(np.atleast_1d(fig.subplots(3 if records else 1, 1, sharex=True)))  # a DAgger-only run: rates only
     ax_rate = axes[0]
-    if records:
-        ax_rate.plot(hours, success, color="tab:green", label="success (episodes ended in the iteration)")
-        ax_rate.plot(hours, toppled, color="tab:red", label="toppled")
+    for name, values in rates.items():
+        ax_rate.plot(hours, values, color=colors.get(name), label=f"{name} (episodes ended in the iteration)")
     if paper_success_percent is not None:
         ax_rate.axhline(paper_success_percent, color="tab:green", ls=":", label=f"paper success {paper_success_percent} %")
     if np.isfinite(difficulty).any():
@@ -183,8 +184,8 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     ax_rate.legend(fontsize=8, loc="upper left")
     if records:
         ax_reward, ax_delta = axes[1:]
-        for key, color in (("/reward/task", "tab:blue"), ("/reward/reach", "tab:orange"), ("/reward/object_velocity", "tab:purple")):
-            ax_reward.plot(hours, smooth(series(key)), color=color, label=key.rsplit("/", 1)[-1] + " reward term (unweighted, mean over worlds)")
+        for key in dict.fromkeys(k for r in records for k in r if k.startswith("/reward/")):
+            ax_reward.plot(hours, smooth(series(key)), label=key.rsplit("/", 1)[-1] + " reward term (mean over worlds)")
         ax_reward.set_ylabel("reward")
         ax_reward.legend(fontsize=8, loc="upper left")
         ax_delta.plot(hours, smooth(series("CaT/mean_delta")), color="k", label="CaT mean termination probability delta")
@@ -209,6 +210,7 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
     last = rounds[-1] if not records else None  # a DAgger-only run ends with its last round
-    return {"iterations": len(records), "hours": total_hours,
-            "success_percent": 100.0 * last["success_rate"] if last else float(success[-1]),
-            "toppled_percent": 100.0 * last["toppled_rate"] if last else float(toppled[-1])}
+    final = {f"{name}_percent": float(values[-1]) for name, values in rates.items()}
+    if last:
+        final |= {"success_percent": 100.0 * last["success_rate"], "toppled_percent": 100.0 * last["toppled_rate"]}
+    return {"iterations": len(records), "hours": total_hours, **final}

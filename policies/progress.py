@@ -187,7 +187,8 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
         for key in dict.fromkeys(k for r in records for k in r if k.startswith("/reward/")):
             ax_reward.plot(hours, smooth(series(key)), label=key.rsplit("/", 1)[-1] + " reward term (mean over worlds)")
         ax_reward.set_ylabel("reward")
-        ax_reward.legend(fontsize=8, loc="upper left")
+        if ax_reward.get_legend_handles_labels()[0]:  # runs that logged reward terms
+            ax_reward.legend(fontsize=8, loc="upper left")
         ax_delta.plot(hours, smooth(series("CaT/mean_delta")), color="k", label="CaT mean termination probability delta")
         ax_delta.set_ylabel("delta")
         ax_delta.legend(fontsize=8, loc="upper left")

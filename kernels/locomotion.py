@@ -14,6 +14,10 @@ in that order, scale 1): ``base_linear_velocity_b`` (3), ``base_angular_velocity
 ``q - q_default``), ``arm_joint_velocity`` (5). Critic (67, noiseless): the same, then ``base_height``
 (1), ``foot_contact`` (4) and ``base_mass_offset`` (1).
 
+Rewards (``REWARD_TERMS``): ``w exp(-e^2 / sigma)`` for the heading-frame velocity, the yaw rate, the attitude
+and the height, and legged_gym's stepping reward ``w sum_feet (t_air - t_target)`` at touchdowns while the
+command asks to move (``compute_rewards``).
+
 Constraints (CaT, violated where > 0), columns in ``CONSTRAINT_GROUPS`` order: leg joint torque
 ``|tau| - tau_nominal`` (12), leg joint velocity ``|qd| - qd_max`` (12), leg joint acceleration
 ``|qd_t - qd_{t-1}| / dt - qdd_max`` (12), leg action rate ``|a_t - a_{t-1}| / dt - rate_max`` (12),

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from dynpush.assets_usd import LEG_JOINT_NAMES
 from dynpush.kernels.locomotion import NUM_LEG_JOINTS, NUM_POLICY_OBS, POLICY_TERMS
@@ -22,12 +23,12 @@ from dynpush.runtime.locomotion import locomotion_contract
 from .export import config_sha256, load_actor, load_run_config, resolve_checkpoint, write_onnx
 from .locomotion_train import LocomotionTrainConfig
 
+if TYPE_CHECKING:
+    from dynpush.sim.legged_scene import LeggedRobotDescription
 
-def runtime_section(cfg: LocomotionTrainConfig, path: str) -> OnnxLocomotionConfig:
-    """The runtime's ``locomotion.onnx`` config section for a network trained with ``cfg`` at ``path``."""
-    from dynpush.sim.legged_scene import legged_robot_builder
 
-    robot = legged_robot_builder()[1]
+def runtime_section(cfg: LocomotionTrainConfig, robot: LeggedRobotDescription, path: str) -> OnnxLocomotionConfig:
+    """The runtime's ``locomotion.onnx`` config section for a network trained with ``cfg`` on ``robot`` at ``path``."""
     return OnnxLocomotionConfig(
         path=path,
         observation=[LocomotionTerm(name=name, scale=1.0) for name, _ in POLICY_TERMS],
@@ -50,7 +51,7 @@ def export_locomotion(run_dir: Path, checkpoint: str | None = None, out: Path | 
     robot = legged_robot_builder()[1]
     training_config = json.loads(json.dumps(cfg.to_dict()))
     metadata = locomotion_contract(
-        runtime_section(cfg, out.name),
+        runtime_section(cfg, robot, out.name),
         command_names=["vx", "vy", "yaw_rate", "roll", "pitch", "height"],
         command_lower=list(cfg.env.commands.lower),
         command_upper=list(cfg.env.commands.upper),

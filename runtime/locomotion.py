@@ -97,8 +97,10 @@ def check_locomotion_contract(metadata: dict[str, str], cfg: OnnxLocomotionConfi
     problems = []
     for name, value in trained.items():
         mine = configured[name]
-        same = (np.allclose(mine, value, atol=1e-6) if name in ("default_joint_positions", "action_scale")
-                and len(np.atleast_1d(mine)) == len(np.atleast_1d(value)) else mine == value)
+        if name in ("default_joint_positions", "action_scale"):  # numbers: equal within float tolerance
+            same = np.shape(mine) == np.shape(value) and np.allclose(mine, value, atol=1e-6)
+        else:
+            same = mine == value
         if not same:
             problems.append(f"locomotion.onnx.{name}: config has {mine}, the network was trained with {value}")
     if problems:

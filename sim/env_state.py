@@ -8,6 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 import warp as wp
+from tensordict import TensorDict
 
 
 class ConstraintEpisodeStats:
@@ -41,12 +42,25 @@ class ConstraintEpisodeStats:
 
 class EnvBase:
     """Shared methods of the environments. A subclass sets ``reward_names``, ``_reward_weights`` (a Warp array in
-    that order), ``constraints_t``, ``_constraint_stats`` and implements ``_state_arrays()``."""
+    that order), ``constraints_t``, ``_constraint_stats``, the observation views ``policy_obs_t`` and
+    ``critic_obs_t``, and implements ``_state_arrays()``."""
 
     reward_names: tuple[str, ...] = ()
     _reward_weights: wp.array
     _constraint_stats: ConstraintEpisodeStats
     constraints_t: torch.Tensor
+    policy_obs_t: torch.Tensor
+    critic_obs_t: torch.Tensor
+    num_envs: int
+
+    def get_observations(self) -> TensorDict:
+        """Copies of the observation buffers.
+
+        The Warp buffers are zero-copy torch views that the next step overwrites in place; rsl_rl keeps
+        a reference to the observation it acted on until the step is stored, so it gets a copy.
+        """
+        return TensorDict({"policy": self.policy_obs_t.clone(), "critic": self.critic_obs_t.clone()},
+                          batch_size=[self.num_envs])
 
     def set_reward_weight(self, name: str, value: float) -> None:
         """Changes one reward weight (a name of ``reward_names``)."""

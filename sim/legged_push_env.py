@@ -16,6 +16,8 @@ and observations. Without a locomotion policy (``legged.locomotion_policy = ""``
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import torch
 import warp as wp
@@ -28,7 +30,7 @@ from .push_env import PushEnv
 from .legged_scene import legged_view, locomotion_task
 from .scene import build_scene
 
-LEG_TORQUE_COLUMN = sum(size for name, size in CONSTRAINT_GROUPS[: [n for n, _ in CONSTRAINT_GROUPS].index("leg_joint_torque")])
+LEG_TORQUE_COLUMN = sum(size for _, size in itertools.takewhile(lambda group: group[0] != "leg_joint_torque", CONSTRAINT_GROUPS))
 
 
 class LocomotionNetwork:

@@ -213,11 +213,6 @@ class LocomotionEnv(EnvBase, VecEnv):
         self._constraint_stats.clear()
         return self.get_observations()
 
-    def get_observations(self) -> TensorDict:
-        """Copies of the observation buffers (the next step overwrites the zero-copy views in place)."""
-        return TensorDict({"policy": self.policy_obs_t.clone(), "critic": self.critic_obs_t.clone()},
-                          batch_size=[self.num_envs])
-
     def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
         self.actions_t.copy_(actions)
         with wp.ScopedDevice(self.wp_device):

@@ -492,15 +492,6 @@ class PushEnv(EnvBase, VecEnv):
         self._constraint_stats.clear()
         return self.get_observations()
 
-    def get_observations(self) -> TensorDict:
-        """Copies of the observation buffers.
-
-        The Warp buffers are zero-copy torch views that the next step overwrites in place; rsl_rl keeps
-        a reference to the observation it acted on until the step is stored, so it gets a copy.
-        """
-        return TensorDict({"policy": self.policy_obs_t.clone(), "critic": self.critic_obs_t.clone()},
-                          batch_size=[self.num_envs])
-
     def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
         self.actions_t.copy_(actions)
         with wp.ScopedDevice(self.wp_device):

@@ -17,7 +17,8 @@ import warp as wp
 
 from dynpush.kernels import actions, base_tracking, constraints, contacts, keypoints, rewards, sampling, terminations
 from dynpush.kernels.views import CONTACT_COLUMNS, EE_CONTACT, NUM_COLLISIONS, PushTask, RobotView
-from warp_numpy_helpers import DEVICE, make_struct, quat_rotate, quat_rotate_inv, random_quat
+from warp_numpy_helpers import (DEVICE, arr, as_f32, axis_angle_quat, close, launch, make_struct, quat_matrix, quat_mul,
+                                quat_rotate, quat_rotate_inv, random_quat)
 
 wp.config.enable_backward = False
 wp.config.quiet = True
@@ -29,30 +30,8 @@ ARM_Q, ARM_QD = 7, 6  # offsets of the first arm joint
 OBJECT_Q, OBJECT_QD = 13, 12
 
 
-# --------------------------------------------------------------------------- numpy geometry
-
-
-
-
-def quat_matrix(q):
-    """(..., 3, 3) rotation matrices: the columns are the rotated basis vectors."""
-    return np.stack([quat_rotate(q, np.broadcast_to(e, q.shape[:-1] + (3,))) for e in np.eye(3)], axis=-1)
-
-
-def quat_mul(a, b):
-    ua, wa, ub, wb = a[..., :3], a[..., 3:], b[..., :3], b[..., 3:]
-    return np.concatenate([wa * ub + wb * ua + np.cross(ua, ub), wa * wb - np.sum(ua * ub, -1, keepdims=True)], -1)
-
-
-def axis_angle_quat(axis, angle):
-    axis = axis / np.linalg.norm(axis, axis=-1, keepdims=True)
-    return np.concatenate([axis * np.sin(angle / 2)[..., None], np.cos(angle / 2)[..., None]], -1)
-
-
 def yaw_quat(yaw):
     return axis_angle_quat(np.broadcast_to([0.0, 0.0, 1.0], np.shape(yaw) + (3,)), np.asarray(yaw))
-
-
 
 
 def transform_point(x, p):
@@ -83,18 +62,6 @@ def assert_uniform(u, name):
     i = np.arange(1, n + 1)
     d = max(np.max(i / n - u), np.max(u - (i - 1) / n))
     assert d < 1.95 / math.sqrt(n), f"{name}: KS distance {d:.4f} for {n} samples"
-
-
-# --------------------------------------------------------------------------- structs and launches
-
-
-def arr(values, dtype=float):
-    values = np.asarray(values, dtype=np.int32 if dtype is int else np.float32)
-    return wp.array(values, dtype=dtype, device=DEVICE)
-
-
-def launch(kernel, dim, *inputs):
-    wp.launch(kernel, dim=dim, inputs=list(inputs), device=DEVICE)
 
 
 def random_state(rng, n):
@@ -145,17 +112,8 @@ def random_state(rng, n):
     return as_f32(robot), as_f32(task)
 
 
-def as_f32(values):
-    """Rounds the float buffers to float32 so that the references see exactly the kernels' inputs."""
-    return {k: (v.astype(np.float32).astype(np.float64) if np.asarray(v).dtype.kind == "f" else v) for k, v in values.items()}
-
-
 def structs(robot, task):
     return make_struct(RobotView, **robot), make_struct(PushTask, **task)
-
-
-def close(actual, expected, rtol=1e-4, atol=1e-5, err_msg=""):
-    np.testing.assert_allclose(actual, expected, rtol=rtol, atol=atol, err_msg=err_msg)
 
 
 # --------------------------------------------------------------------------- actions (III-C)
@@ -658,7 +616,6 @@ def test_start_episodes():
     close(body_mass.numpy(), mass, rtol=1e-6)
     close(inv_mass.numpy()[robot_np["base_body"][r]], 1.0 / mass[robot_np["base_body"][r]], rtol=1e-6)
     np.testing.assert_array_equal(variant.numpy(), np.where(r, spec_np["shape"], -1))
-
 
 
 def test_zero_velocities():

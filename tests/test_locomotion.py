@@ -18,6 +18,7 @@ from dynpush.policies.locomotion_train import LocomotionTrainConfig
 from dynpush.policies.train import train
 from dynpush.runtime.errors import StartupError
 from dynpush.runtime.locomotion import OnnxLocomotion, read_locomotion_contract
+from dynpush.runtime.observation import quat_to_matrix
 from dynpush.runtime.packets import Proprioception
 from dynpush.runtime.tick_log import read_log
 from dynpush.sim.config import LeggedModeConfig, PushEnvConfig
@@ -90,10 +91,7 @@ def test_runtime_observation_equals_the_warp_kernel(locomotion_run, robot_contra
     joint_q, joint_qd = env.state_0.joint_q.numpy(), env.state_0.joint_qd.numpy()
     for w in range(4):
         quat = body_q[scene.base_body[w], 3:].astype(np.float64)
-        x, y, z, s = quat
-        R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - s * z), 2 * (x * z + s * y)],
-                      [2 * (x * y + s * z), 1 - 2 * (x * x + z * z), 2 * (y * z - s * x)],
-                      [2 * (x * z - s * y), 2 * (y * z + s * x), 1 - 2 * (x * x + y * y)]])
+        R = quat_to_matrix(quat)
         twist = body_qd[scene.base_body[w]].astype(np.float64)
         state = Proprioception(seq=0, stamp_s=0.0, base_quat_xyzw=quat, base_linear_velocity_b=R.T @ twist[:3],
                                base_angular_velocity_b=R.T @ twist[3:], ee_position_b=np.zeros(3),

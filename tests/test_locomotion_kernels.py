@@ -12,7 +12,8 @@ import numpy as np
 import warp as wp
 
 from dynpush.kernels import locomotion as k
-from warp_numpy_helpers import DEVICE, make_struct, quat_rotate, quat_rotate_inv, random_quat
+from warp_numpy_helpers import (DEVICE, arr, as_f32, axis_angle_quat, close, launch, make_struct, quat_matrix, quat_mul,
+                                quat_rotate, quat_rotate_inv, random_quat)
 
 wp.config.enable_backward = False
 wp.config.quiet = True
@@ -25,25 +26,6 @@ EZ = np.array([0.0, 0.0, 1.0])
 # --------------------------------------------------------------------------- numpy helpers
 def f32(x):
     return np.asarray(x, dtype=np.float32).astype(np.float64)
-
-
-def as_f32(values):
-    return {n: (f32(v) if np.asarray(v).dtype.kind == "f" else v) for n, v in values.items()}
-
-
-def quat_matrix(q):
-    """(..., 3, 3): the columns are the rotated basis vectors."""
-    return np.stack([quat_rotate(q, np.broadcast_to(e, q.shape[:-1] + (3,))) for e in np.eye(3)], axis=-1)
-
-
-def quat_mul(a, b):
-    ua, wa, ub, wb = a[..., :3], a[..., 3:], b[..., :3], b[..., 3:]
-    return np.concatenate([wa * ub + wb * ua + np.cross(ua, ub), wa * wb - np.sum(ua * ub, -1, keepdims=True)], -1)
-
-
-def axis_angle_quat(axis, angle):
-    axis = axis / np.linalg.norm(axis, axis=-1, keepdims=True)
-    return np.concatenate([axis * np.sin(angle / 2)[..., None], np.cos(angle / 2)[..., None]], -1)
 
 
 def tilted_quat(rng, n, max_tilt):
@@ -64,17 +46,7 @@ def heading(q, v):
     return v_h, np.arctan2(-z_h[:, 1], z_h[:, 2]), np.arctan2(z_h[:, 0], z_h[:, 2])
 
 
-def close(actual, expected, rtol=1e-4, atol=1e-5, err_msg=""):
-    np.testing.assert_allclose(actual, expected, rtol=rtol, atol=atol, err_msg=err_msg)
-
-
 # --------------------------------------------------------------------------- scenes and structs
-def arr(values, dtype=float):
-    return wp.array(np.asarray(values, dtype=np.int32 if dtype is int else np.float32), dtype=dtype, device=DEVICE)
-
-
-def launch(kernel, dim, *inputs):
-    wp.launch(kernel, dim=dim, inputs=list(inputs), device=DEVICE)
 
 
 def random_scene(rng, n):

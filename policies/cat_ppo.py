@@ -26,6 +26,8 @@ from rsl_rl.env import VecEnv
 from rsl_rl.models import MLPModel
 from rsl_rl.storage import RolloutStorage
 
+from .expert_regularization import ExpertImitationLoss
+
 
 class CaTPPO(PPO):
     """PPO with Constraints as Terminations."""
@@ -138,6 +140,14 @@ class CaTPPO(PPO):
         st.advantages = st.returns - st.values
         if not self.normalize_advantage_per_mini_batch:
             st.advantages = (st.advantages - st.advantages.mean()) / (st.advantages.std() + 1e-8)
+
+    def update(self) -> dict[str, float]:
+        """rsl_rl's PPO update; the expert-imitation term, which rides on rsl_rl's symmetry-loss hook
+        (:mod:`dynpush.policies.expert_regularization`), is reported as ``imitation``."""
+        losses = super().update()
+        if isinstance(self.symmetry, ExpertImitationLoss):
+            losses["imitation"] = losses.pop("symmetry")
+        return losses
 
     def save(self) -> dict:
         """Return PPO's saved dict plus the CaT state (``c_max``)."""

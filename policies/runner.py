@@ -20,7 +20,8 @@ from rsl_rl.runners import OnPolicyRunner
 from dynpush.policies.cat_ppo import CaTPPO
 from dynpush.policies.curriculum import GoalCurriculumConfig
 from dynpush.policies.progress import ProgressLogger
-from dynpush.policies.schedules import ScheduleConfig, p_max_at, reach_weight_at
+from dynpush.policies.expert_regularization import ExpertImitationLoss
+from dynpush.policies.schedules import ScheduleConfig, imitation_weight_at, p_max_at, reach_weight_at
 
 
 class CaTOnPolicyRunner(OnPolicyRunner):
@@ -45,6 +46,9 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self.schedule_cfg = ScheduleConfig.from_dict(train_cfg.get("schedule", {}))
         self.curriculum = GoalCurriculumConfig(**train_cfg.get("curriculum", {}))
         self.critic_warmup_iterations = train_cfg.get("critic_warmup_iterations", 0)
+        self.imitation_weight = tuple(train_cfg.get("imitation_weight", (0.0, 0.0)))
+        if max(self.imitation_weight) > 0:  # the environment labels its observations (ExpertLabelledEnv)
+            self.alg.symmetry = ExpertImitationLoss()
         self.logger.__class__ = ProgressLogger  # rsl_rl's logger plus a progress bar and a one-line summary
         self.logger.run_state = {}
         self._snapshot: dict | None = None
@@ -74,10 +78,15 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         super().learn(num_learning_iterations, init_at_random_ep_len)
 
     def apply_schedules(self, iteration: int, total_iterations: int) -> None:
-        """Set ``p_max`` and the reach-reward weight for ``iteration`` of a run of ``total_iterations``."""
+        """Set ``p_max``, the reach-reward weight and the imitation weight for ``iteration`` of a run of
+        ``total_iterations``."""
         self.alg.set_p_max(p_max_at(iteration, total_iterations, self.schedule_cfg, self.env.constraint_groups))
         if self.schedule_cfg.reach is not None:
             self.env.set_reward_weight("reach", reach_weight_at(iteration, total_iterations, self.schedule_cfg))
+        if isinstance(self.alg.symmetry, ExpertImitationLoss):
+            weight = imitation_weight_at(iteration, total_iterations, self.imitation_weight)
+            self.alg.symmetry.mirror_loss_coeff = weight
+            self.logger.run_state["/imitation/weight"] = weight
 
     def apply_curriculum(self, fresh_run: bool) -> None:
         """Sets the goal difficulty from the success rate of the episodes that ended since the last call."""

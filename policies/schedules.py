@@ -1,4 +1,5 @@
-"""Training-iteration schedules of the push task: CaT ``p_max`` curricula and the reach-reward weight.
+"""Training-iteration schedules of the push task: CaT ``p_max`` curricula, the reach-reward weight and the
+imitation weight of expert-regularised runs.
 
 The numbers are those of Dadiotis et al. (ICRA 2025), Table "Rewards and constraints" and Sec. "Rewards &
 constraints". The paper trains for 20000 iterations; a shorter run compresses every schedule by its length
@@ -130,3 +131,10 @@ def reach_weight_at(iteration: int, total_iterations: int, cfg: ScheduleConfig |
     cfg = cfg or ScheduleConfig()
     switch = scaled_iterations(cfg.reach.switch_iteration, total_iterations, cfg)
     return cfg.reach.weight / cfg.reach.divisor if iteration >= switch else cfg.reach.weight
+
+
+def imitation_weight_at(iteration: int, total_iterations: int, weight: tuple[float, float]) -> float:
+    """Weight of the expert-imitation loss term (:mod:`dynpush.policies.expert_regularization`, ours) at
+    ``iteration``: linear from ``weight[0]`` at the first iteration to ``weight[1]`` at the last of the run."""
+    progress = min(max(iteration / max(total_iterations - 1, 1), 0.0), 1.0)
+    return weight[0] + (weight[1] - weight[0]) * progress

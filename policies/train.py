@@ -81,6 +81,9 @@ class TrainConfig:
     # Iterations at the start of the run in which only the critic learns and the actor is held (ours): for
     # runs that start from a ``dynpush imitate`` checkpoint, whose critic has not learnt the returns yet.
     critic_warmup_iterations: int = 0
+    # Weight of the scripted pusher's imitation term in PPO's loss, (first, last iteration), linear in between
+    # (ours, policies/expert_regularization.py); (0, 0) is plain CaT-PPO.
+    imitation_weight: tuple[float, float] = (0.0, 0.0)
 
     @staticmethod
     def preset_config(name: str) -> TrainConfig:
@@ -110,6 +113,8 @@ class TrainConfig:
         for name, pair in self.p_max_overrides.items():
             if len(pair) != 2 or not all(0.0 <= p <= 1.0 for p in pair):
                 raise ConfigError(f"p_max_overrides[{name!r}] must be (initial, final) within [0, 1], got {pair!r}")
+        if len(self.imitation_weight) != 2 or not all(w >= 0.0 for w in self.imitation_weight):
+            raise ConfigError(f"imitation_weight must be (first, last) with both >= 0, got {self.imitation_weight!r}")
         if self.ppo.schedule not in ("adaptive", "fixed"):
             raise ConfigError(f"ppo.schedule must be 'adaptive' or 'fixed', got {self.ppo.schedule!r}")
         return self
@@ -120,7 +125,9 @@ class TrainConfig:
     def make_env(self, env: PushEnvConfig):
         from dynpush.sim.push_env import PushEnv
 
-        return PushEnv(env)
+        from .expert_regularization import ExpertLabelledEnv
+
+        return ExpertLabelledEnv(PushEnv(env)) if max(self.imitation_weight) > 0 else PushEnv(env)
 
     @staticmethod
     def from_dict(data: dict) -> TrainConfig:
@@ -138,6 +145,7 @@ class TrainConfig:
             },
             "curriculum": dataclasses.asdict(self.curriculum),
             "critic_warmup_iterations": self.critic_warmup_iterations,
+            "imitation_weight": tuple(self.imitation_weight),
         }
 
 

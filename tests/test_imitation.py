@@ -114,3 +114,41 @@ def test_critic_warmup_holds_the_actor_and_trains_the_critic(tmp_path, monkeypat
     assert not all(torch.equal(a, b) for a, b in zip(second[0], third[0]))  # iteration 2 trains the actor
     assert all(p.requires_grad for p in runner.alg.actor.parameters())
 
+
+
+def test_expert_regularised_ppo_stores_the_experts_labels_and_pulls_the_actor_to_them(tmp_path, monkeypatch):
+    from dynpush.policies.cat_ppo import CaTPPO
+    from dynpush.policies.expert_regularization import EXPERT_ACTION_GROUP, ExpertLabelledEnv
+    from dynpush.policies.scripted import ScriptedPusher
+    from dynpush.sim.push_env import PushEnv
+
+    cfg = apply_overrides(tiny(iterations=12), ["imitation_weight=(50.0, 10.0)", "ppo.learning_rate=0.003"])
+    env = cfg.make_env(cfg.env)
+    assert isinstance(env, ExpertLabelledEnv)
+    observations = env.get_observations()
+    assert isinstance(env.env, PushEnv)
+    expert = ScriptedPusher(env.env)  # an expert of its own on the same state
+    np.testing.assert_allclose(observations[EXPERT_ACTION_GROUP].numpy(), expert(None), atol=1e-6)
+    with pytest.raises(ConfigError, match="imitation_weight must be"):
+        apply_overrides(tiny(), ["imitation_weight=(-1.0, 0.0)"]).validate()
+
+    distances, weights, logged = [], [], []
+    original = CaTPPO.update
+
+    def update(self):
+        storage = self.storage
+        batch = storage.observations.flatten(0, 1)
+        with torch.no_grad():
+            mean = self.actor(batch)
+        distances.append(float((mean - batch[EXPERT_ACTION_GROUP]).pow(2).sum(-1).mean()))
+        weights.append(self.symmetry.mirror_loss_coeff)
+        losses = original(self)
+        logged.append(losses)
+        return losses
+
+    monkeypatch.setattr(CaTPPO, "update", update)
+    train(cfg, tmp_path / "run")
+    assert weights[0] == pytest.approx(50.0) and weights[-1] == pytest.approx(10.0)
+    assert all("imitation" in losses and "symmetry" not in losses for losses in logged)
+    assert distances[-1] < 0.5 * distances[0]  # a random actor moves toward the expert's actions
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["imitation_weight"] == [50.0, 10.0]

@@ -53,7 +53,10 @@ def _train(args: argparse.Namespace) -> int:
         if fields != ["iterations"]:
             raise ConfigError(f"--resume continues the run's own config; only iterations=N may be set, got {fields}")
         extend_to = cfg.iterations
-    train(cfg, Path(args.runs) / name, resume=args.resume, command=command, extend_to=extend_to)
+    if args.init_from and args.resume:
+        raise ConfigError("--init-from starts a new run; --resume continues one: give one of them")
+    train(cfg, Path(args.runs) / name, resume=args.resume, command=command, extend_to=extend_to,
+          init_from=Path(args.init_from) if args.init_from else None)
     return 0
 
 
@@ -86,6 +89,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--name", default=None, help="run name (default: the preset)")
     p.add_argument("--runs", default="runs", help="folder of the runs")
     p.add_argument("--resume", action="store_true", help="continue the run from its latest checkpoint")
+    p.add_argument("--init-from", default=None, metavar="CHECKPOINT",
+                   help="start a new run from the actor and critic (with their normalisers) of another run's checkpoint,"
+                        " e.g. runs/bc/imitation.pt; optimizer, CaT state and iteration count start fresh")
     p.add_argument("--procs", type=int, default=1,
                    help="processes on this machine (torchrun, gloo on CPU / NCCL on GPUs); env.num_envs is split")
     p.add_argument("--set", nargs="*", metavar="FIELD=VALUE", help="override config fields, e.g. env.num_envs=256 iterations=100")

@@ -241,12 +241,15 @@ class ProcessGroup:
 
 
 def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool = False, command: str | None = None,
-          extend_to: int | None = None) -> CaTOnPolicyRunner:
+          extend_to: int | None = None, init_from: Path | None = None) -> CaTOnPolicyRunner:
     """Trains (or resumes) a push or locomotion policy (the task of ``cfg``'s type) into ``run_dir``; saves on
     Ctrl-C / SIGTERM.
 
     A resumed run uses its own ``config.json``; ``extend_to`` changes its length to that many
-    iterations in all (schedules that scale with the run length follow the new length).
+    iterations in all (schedules that scale with the run length follow the new length). A new run with
+    ``init_from`` (a checkpoint of another run with the same networks, e.g. its ``imitation.pt``) starts from
+    that run's actor and critic with their normalisers; its optimizer (learning rate of ``cfg``), CaT state,
+    iteration count and episodes are its own.
 
     Under torchrun every process runs one shard of ``cfg.env.num_envs`` worlds; gradients and
     normaliser statistics are averaged across processes (rsl_rl), rank 0 logs and saves.
@@ -276,6 +279,8 @@ def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool 
         if checkpoint is None:
             raise FileNotFoundError(f"--resume: no model_*.pt in {run_dir}")
         runner.load(str(checkpoint), restore_env=group.world_size == 1)
+    elif init_from is not None:
+        runner.load(str(init_from), load_cfg={"actor": True, "critic": True}, restore_env=False)
     remaining = cfg.iterations - runner.current_learning_iteration
     if remaining <= 0:
         print(f"{run_dir}: all {cfg.iterations} iterations done")

@@ -152,3 +152,16 @@ def test_expert_regularised_ppo_stores_the_experts_labels_and_pulls_the_actor_to
     assert all("imitation" in losses and "symmetry" not in losses for losses in logged)
     assert distances[-1] < 0.5 * distances[0]  # a random actor moves toward the expert's actions
     assert json.loads((tmp_path / "run" / "config.json").read_text())["imitation_weight"] == [50.0, 10.0]
+
+
+def test_a_new_run_starts_from_another_runs_imitation_actor_with_its_own_optimizer(tmp_path):
+    checkpoint = imitate(tiny(), tiny_imitation(1), tmp_path / "bc")
+    cfg = apply_overrides(tiny(iterations=2, warmup=2), ["ppo.learning_rate=0.0002", "ppo.schedule=fixed"])
+    runner = train(cfg, tmp_path / "fine", init_from=checkpoint)  # the actor is held in both iterations
+    saved = torch.load(checkpoint, weights_only=False)
+    held = {name: value for name, value in runner.alg.actor.state_dict().items() if "normalizer" not in name}
+    assert any(name.startswith("mlp.") for name in held)  # the normaliser goes on learning from the rollouts
+    for name, value in held.items():
+        torch.testing.assert_close(value, saved["actor_state_dict"][name], msg=name)
+    assert runner.alg.learning_rate == 0.0002 and runner.current_learning_iteration == 1
+    assert (tmp_path / "fine" / "model_1.pt").exists() and not (tmp_path / "fine" / "imitation.pt").exists()

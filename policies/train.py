@@ -266,7 +266,7 @@ def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool 
     if group.rank == 0:
         run_dir.mkdir(parents=True, exist_ok=True)
         config_path.write_text(json.dumps(cfg.to_dict(), indent=2))
-        record_launch(run_dir, command, group.world_size, resume)
+        record_launch(run_dir, command, group.world_size, resume, init_from)
     if cfg.env.device == "cpu":
         torch.set_num_threads(1)  # one core per process: Warp launches already use one
 
@@ -325,12 +325,15 @@ def source_commit() -> str | None:
     return commit + ("-dirty" if dirty else "")
 
 
-def record_launch(run_dir: Path, command: str | None, procs: int, resume: bool) -> None:
-    """Appends this launch (the ``dynpush train`` command line, processes, commit, time) to ``launches.jsonl``."""
+def record_launch(run_dir: Path, command: str | None, procs: int, resume: bool, init_from: Path | None = None) -> None:
+    """Appends this launch (the ``dynpush train`` command line, processes, commit, time and the checkpoint a new
+    run started from) to ``launches.jsonl``."""
     import time
 
     record = {"command": command, "processes": procs, "resume": resume, "commit": source_commit(),
               "torch": torch.__version__, "time": time.time()}
+    if init_from is not None:
+        record["init_from"] = str(Path(init_from).resolve())
     with open(run_dir / "launches.jsonl", "a") as f:
         f.write(json.dumps(record) + "\n")
 

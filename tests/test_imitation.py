@@ -165,3 +165,5 @@ def test_a_new_run_starts_from_another_runs_imitation_actor_with_its_own_optimiz
         torch.testing.assert_close(value, saved["actor_state_dict"][name], msg=name)
     assert runner.alg.learning_rate == 0.0002 and runner.current_learning_iteration == 1
     assert (tmp_path / "fine" / "model_1.pt").exists() and not (tmp_path / "fine" / "imitation.pt").exists()
+    launch = json.loads((tmp_path / "fine" / "launches.jsonl").read_text().splitlines()[0])
+    assert launch["init_from"] == str(checkpoint.resolve())

@@ -5,7 +5,8 @@ exported to ``policy.onnx``, evaluated with ``dynpush eval`` on the training dis
 episodes by default, paper IV-A), the learning curve is drawn from ``progress.jsonl``, and
 ``training.json`` records the training command(s) from ``launches.jsonl``, the seed, the commit, the
 checkpoint, the training wall-clock and world-steps (the DAgger rounds of a run started by ``dynpush
-imitate`` included, and also listed on their own), and the evaluation summary.
+imitate`` included, and also listed on their own; a run started with ``--init-from`` counts the run it
+started from), and the evaluation summary.
 """
 
 from __future__ import annotations
@@ -29,20 +30,15 @@ def read_launches(run_dir: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
-def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: int = 4096, seed: int = 0) -> dict:
-    """Writes the shipped files of ``run_dir``'s checkpoint (default: the latest) into ``out_dir``; returns training.json."""
-    run_dir = Path(run_dir)
+def provenance(run_dir: Path, checkpoint_path: Path) -> dict:
+    """What trained ``run_dir``'s checkpoint: its commands, seed, iterations, world-steps and wall-clock (DAgger
+    rounds included); a run started with ``--init-from`` adds the run it started from (``initialised_from``), whose
+    commands come first and whose world-steps and hours are counted in."""
     cfg = load_run_config(run_dir)
-    checkpoint_path = resolve_checkpoint(run_dir, checkpoint)
     launches = read_launches(run_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    policy_path = export_policy(run_dir, checkpoint_path.name, out_dir / "policy.onnx")
-    result = evaluate(policy_path, EvalConfig(episodes=episodes, seed=seed), out_dir)
     iteration = int(torch.load(checkpoint_path, weights_only=False, map_location="cpu")["iter"])  # completed iterations
-    plot_learning_curve(run_dir, out_dir / "learning_curve.png", result["paper"]["success_rate"], iteration)
     trained = [r for r in training_records(run_dir) if r["iteration"] < iteration]
     imitation = imitation_summary(run_dir)
-    shutil.copyfile(run_dir / "config.json", out_dir / "training_config.json")
     record = {
         "run": run_dir.name,
         "commands": [launch["command"] for launch in launches],
@@ -55,6 +51,28 @@ def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: 
         "training_wall_clock_h": (float(wall_clock_hours(trained)[-1]) if trained else 0.0)
                                  + (imitation["wall_clock_h"] if imitation else 0.0),
         "imitation": imitation,
+    }
+    source = launches[0].get("init_from")
+    if source is not None:
+        upstream = provenance(Path(source).parent, Path(source))
+        record["initialised_from"] = upstream
+        record["commands"] = upstream["commands"] + record["commands"]
+        record["world_steps"] += upstream["world_steps"]
+        record["training_wall_clock_h"] += upstream["training_wall_clock_h"]
+    return record
+
+
+def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: int = 4096, seed: int = 0) -> dict:
+    """Writes the shipped files of ``run_dir``'s checkpoint (default: the latest) into ``out_dir``; returns training.json."""
+    run_dir = Path(run_dir)
+    checkpoint_path = resolve_checkpoint(run_dir, checkpoint)
+    record = provenance(run_dir, checkpoint_path)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    policy_path = export_policy(run_dir, checkpoint_path.name, out_dir / "policy.onnx")
+    result = evaluate(policy_path, EvalConfig(episodes=episodes, seed=seed), out_dir)
+    plot_learning_curve(run_dir, out_dir / "learning_curve.png", result["paper"]["success_rate"], record["iterations"])
+    shutil.copyfile(run_dir / "config.json", out_dir / "training_config.json")
+    record |= {
         "training_config_sha256": OnnxPolicy(policy_path).contract.training_config_sha256,
         "evaluation": {"episodes": result["episodes"], "success_percent": result["success_rate"],
                        "toppled_percent": result["toppled_rate"],

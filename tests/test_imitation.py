@@ -167,3 +167,11 @@ def test_a_new_run_starts_from_another_runs_imitation_actor_with_its_own_optimiz
     assert (tmp_path / "fine" / "model_1.pt").exists() and not (tmp_path / "fine" / "imitation.pt").exists()
     launch = json.loads((tmp_path / "fine" / "launches.jsonl").read_text().splitlines()[0])
     assert launch["init_from"] == str(checkpoint.resolve())
+
+    from dynpush.policies.ship import provenance
+
+    record = provenance(tmp_path / "fine", tmp_path / "fine" / "model_1.pt")
+    upstream = record["initialised_from"]
+    assert upstream["run"] == "bc" and upstream["iterations"] == 0 and upstream["imitation"]["rounds"] == 1
+    assert record["commands"] == [*upstream["commands"], launch["command"]]
+    assert record["world_steps"] == 2 * 6 * 8 + 8 * 40  # two iterations of 6 steps in 8 worlds + one DAgger round

@@ -21,7 +21,7 @@ from dynpush.runtime.locomotion import OnnxLocomotion, read_locomotion_contract
 from dynpush.runtime.observation import quat_to_matrix
 from dynpush.runtime.packets import Proprioception
 from dynpush.runtime.tick_log import read_log
-from dynpush.sim.config import LeggedModeConfig, PushEnvConfig
+from dynpush.sim.config import ConfigError, LeggedModeConfig, MuJoCoConfig, PushEnvConfig
 from dynpush.sim.legged_push_env import LEG_TORQUE_COLUMN
 from dynpush.sim.locomotion_config import LocomotionEnvConfig, LocomotionNoiseConfig
 from dynpush.sim.locomotion_env import LocomotionEnv
@@ -148,6 +148,12 @@ def test_legged_push_env_runs_the_locomotion_policy_and_constrains_simulated_leg
                                np.abs(tau) - np.tile(env.cfg.constraints.leg_nominal_torque, 4), rtol=1e-4, atol=1e-3)
     with pytest.raises(RuntimeError, match="runs its own locomotion policy"):
         env.set_leg_targets(np.zeros((2, 12)))
+    # MuJoCo solves every contact Newton generated (a clipped buffer dropped the object's ground contacts)
+    assert int(env.solver.mjw_data.nacon.numpy()[0]) == int(env.contacts.rigid_contact_count.numpy()[0]) > 8
+    with pytest.raises(ConfigError, match=r"legged.mujoco.nconmax \(24\) must be >= sim.contacts_per_world \(48\)"):
+        PushEnvConfig(legged=LeggedModeConfig(mujoco=MuJoCoConfig(nconmax=24, njmax=96))).validate()
+    with pytest.raises(ConfigError, match=r"legged.mujoco.njmax \(64\) must be >= 4 x legged.mujoco.nconmax"):
+        PushEnvConfig(legged=LeggedModeConfig(mujoco=MuJoCoConfig(nconmax=48, njmax=64))).validate()
 
 
 def test_sim2sim_with_the_runtime_running_the_locomotion_onnx(locomotion_run, robot_contract, tmp_path):

@@ -53,7 +53,7 @@ from tqdm import tqdm
 from dynpush.kernels.constraints import CONSTRAINT_GROUPS
 from dynpush.kernels.observations import POLICY_TERMS, PRIVILEGED_TERMS
 from dynpush.runtime.observation import NUM_ARM_JOINTS, quat_to_matrix
-from dynpush.sim.config import ConfigError, PushEnvConfig
+from dynpush.sim.config import ConfigError, LeggedModeConfig, PushEnvConfig
 from dynpush.sim.episode import SHAPES
 from dynpush.sim.push_env import PushEnv, make_push_env
 
@@ -106,6 +106,8 @@ def env_config_for(policy: OnnxPolicy, num_envs: int, noise: bool | None = None,
     from .train import TrainConfig, apply_overrides
 
     cfg = TrainConfig.from_dict(policy.contract.training_config)
+    if not cfg.env.legged.enabled:  # trained on the tracked base: legged mode, if asked for, has today's settings
+        cfg.env.legged = LeggedModeConfig()
     cfg.env.num_envs = num_envs
     cfg.env.device = device
     cfg.env.seed = seed

@@ -170,3 +170,22 @@ def test_play_writes_a_picture_and_a_usd_animation(policy, tmp_path):
     assert stage.GetEndTimeCode() == 10  # 0.2 s at 50 frames per second
     animated = [a for p in stage.Traverse() for a in p.GetAttributes() if a.GetNumTimeSamples() > 1]
     assert animated
+
+
+def test_legged_evaluation_of_a_tracked_base_policy_uses_todays_legged_settings(tmp_path):
+    """A policy trained on the tracked base carries the legged-mode section of its time in its training config;
+    evaluating it in legged mode must not inherit those simulator buffers (24 / 64 dropped contacts)."""
+    from dynpush.policies.evaluate import env_config_for
+    from dynpush.policies.export import OnnxPolicy
+    from dynpush.sim.config import LeggedModeConfig
+
+    run = tmp_path / "old"
+    run.mkdir()
+    cfg = apply_overrides(TrainConfig.preset_config("cpu"), ["network.actor_hidden=(16, 16)"])
+    saved = cfg.to_dict()
+    saved["env"]["legged"]["mujoco"] |= {"nconmax": 24, "njmax": 64}
+    (run / "config.json").write_text(json.dumps(saved))
+    torch.save({"actor_state_dict": build_actor(cfg).state_dict()}, run / "model_0.pt")
+    policy = OnnxPolicy(export_policy(run))
+    env_cfg = env_config_for(policy, num_envs=2, overrides=["env.legged.enabled=True"])
+    assert env_cfg.legged.enabled and env_cfg.legged.mujoco == LeggedModeConfig().mujoco

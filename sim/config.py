@@ -301,6 +301,8 @@ class LeggedModeConfig:
 
     def validate(self, prefix: str = "legged", contacts_per_world: int | None = None) -> None:
         self.mujoco.validate(f"{prefix}.mujoco")
+        if not self.enabled:  # runs saved before Dec 2026 carry the locomotion task's buffers here, unused
+            return
         if contacts_per_world is not None and self.mujoco.nconmax < contacts_per_world:
             raise ConfigError(f"{prefix}.mujoco.nconmax ({self.mujoco.nconmax}) must be >= sim.contacts_per_world "
                               f"({contacts_per_world}): MuJoCo would drop contacts that Newton generates")

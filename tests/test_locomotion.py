@@ -151,9 +151,10 @@ def test_legged_push_env_runs_the_locomotion_policy_and_constrains_simulated_leg
     # MuJoCo solves every contact Newton generated (a clipped buffer dropped the object's ground contacts)
     assert int(env.solver.mjw_data.nacon.numpy()[0]) == int(env.contacts.rigid_contact_count.numpy()[0]) > 8
     with pytest.raises(ConfigError, match=r"legged.mujoco.nconmax \(24\) must be >= sim.contacts_per_world \(48\)"):
-        PushEnvConfig(legged=LeggedModeConfig(mujoco=MuJoCoConfig(nconmax=24, njmax=96))).validate()
+        PushEnvConfig(legged=LeggedModeConfig(enabled=True, mujoco=MuJoCoConfig(nconmax=24, njmax=96))).validate()
     with pytest.raises(ConfigError, match=r"legged.mujoco.njmax \(64\) must be >= 4 x legged.mujoco.nconmax"):
-        PushEnvConfig(legged=LeggedModeConfig(mujoco=MuJoCoConfig(nconmax=48, njmax=64))).validate()
+        PushEnvConfig(legged=LeggedModeConfig(enabled=True, mujoco=MuJoCoConfig(nconmax=48, njmax=64))).validate()
+    PushEnvConfig(legged=LeggedModeConfig(mujoco=MuJoCoConfig(nconmax=24, njmax=64))).validate()  # unused when disabled
 
 
 def test_sim2sim_with_the_runtime_running_the_locomotion_onnx(locomotion_run, robot_contract, tmp_path):

@@ -67,9 +67,7 @@ class ExpertImitationLoss:
     """
 
     use_mirror_loss = True
-
-    def __init__(self, weight: float = 0.0):
-        self.mirror_loss_coeff = weight
+    mirror_loss_coeff = 0.0
 
     def augment_batch(self, batch, original_batch_size: int) -> None:
         """No augmentation: the mini-batch is used as stored."""

@@ -299,14 +299,9 @@ class LeggedModeConfig:
     # 0.0 % with 64 / 256 (Dec 2026). Each contact takes 4 constraint rows (pyramidal friction cone).
     mujoco: MuJoCoConfig = field(default_factory=lambda: MuJoCoConfig(nconmax=64, njmax=256))
 
-    def validate(self, prefix: str = "legged", contacts_per_world: int | None = None) -> None:
+    def validate(self, prefix: str = "legged") -> None:
         self.mujoco.validate(f"{prefix}.mujoco")
-        if not self.enabled:  # runs saved before Dec 2026 carry the locomotion task's buffers here, unused
-            return
-        if contacts_per_world is not None and self.mujoco.nconmax < contacts_per_world:
-            raise ConfigError(f"{prefix}.mujoco.nconmax ({self.mujoco.nconmax}) must be >= sim.contacts_per_world "
-                              f"({contacts_per_world}): MuJoCo would drop contacts that Newton generates")
-        if self.mujoco.njmax < 4 * self.mujoco.nconmax:
+        if self.enabled and self.mujoco.njmax < 4 * self.mujoco.nconmax:
             raise ConfigError(f"{prefix}.mujoco.njmax ({self.mujoco.njmax}) must be >= 4 x {prefix}.mujoco.nconmax "
                               f"({4 * self.mujoco.nconmax}): every contact takes 4 constraint rows")
 
@@ -338,7 +333,10 @@ class PushEnvConfig:
 
     def validate(self) -> PushEnvConfig:
         validate_env(self)
-        self.legged.validate("legged", contacts_per_world=self.sim.contacts_per_world)
+        # Runs saved before Dec 2026 carry the locomotion task's buffers in the legged section, unused while it is off.
+        if self.legged.enabled and self.legged.mujoco.nconmax < self.sim.contacts_per_world:
+            raise ConfigError(f"legged.mujoco.nconmax ({self.legged.mujoco.nconmax}) must be >= sim.contacts_per_world "
+                              f"({self.sim.contacts_per_world}): MuJoCo would drop contacts that Newton generates")
         return self
 
 

@@ -120,6 +120,7 @@ class LocomotionParams:
     arm_interval: wp.vec2  # [steps] between arm target changes
     push_interval: wp.vec2  # [steps] between base pushes
     push_velocity: float  # [m/s] max horizontal velocity change of a push
+    disturbance_scale: wp.array(dtype=float)  # (1,) in [0, 1]: multiplies arm_amplitude and push_velocity (training curriculum)
     start_height: float  # [m] base height at reset
     leg_position_noise: float  # [rad] leg joints uniform within default +- noise at reset
 
@@ -209,8 +210,9 @@ def sample_command(rng: wp.uint32, params: LocomotionParams, task: LocomotionTas
 @wp.func
 def sample_arm_target(rng: wp.uint32, params: LocomotionParams, task: LocomotionTask, w: int):
     """A new arm target for world ``w``; ``rng``: a forked stream (``frames.fork_rng``)."""
+    amplitude = params.arm_amplitude * params.disturbance_scale[0]
     for j in range(NUM_ARM_JOINTS):
-        target = params.arm_default[j] + wp.randf(rng, -params.arm_amplitude, params.arm_amplitude)
+        target = params.arm_default[j] + wp.randf(rng, -amplitude, amplitude)
         task.arm_target[w, j] = wp.clamp(target, params.arm_lower[j], params.arm_upper[j])
     task.arm_target[w, NUM_ARM_JOINTS] = params.arm_default[NUM_ARM_JOINTS]
 
@@ -300,8 +302,9 @@ def apply_events(seed: int, params: LocomotionParams, view: LeggedView, task: Lo
     if step >= task.next_push_step[w]:
         rng = next_rng(seed, task.rng_counter, w)
         d0 = view.base_qd_start[w]
-        view.joint_qd[d0 + 0] = view.joint_qd[d0 + 0] + wp.randf(rng, -params.push_velocity, params.push_velocity)
-        view.joint_qd[d0 + 1] = view.joint_qd[d0 + 1] + wp.randf(rng, -params.push_velocity, params.push_velocity)
+        push = params.push_velocity * params.disturbance_scale[0]
+        view.joint_qd[d0 + 0] = view.joint_qd[d0 + 0] + wp.randf(rng, -push, push)
+        view.joint_qd[d0 + 1] = view.joint_qd[d0 + 1] + wp.randf(rng, -push, push)
         task.next_push_step[w] = step + steps_in(wp.randf(rng), params.push_interval)
 
 

@@ -3,7 +3,8 @@
 Same learner as the push task (rsl_rl PPO + our CaT subclass, ``policies/runner.py``); only the environment,
 the network sizes and the ``p_max`` curricula differ. CaT (Chane-Sane et al., IROS 2024): hard constraints
 (collisions) terminate with probability 1 from the start; the others are soft and their ``p_max`` rises
-from 0.05 to 0.25 over the first half of the run.
+from 0.05 to 0.25 over the first half of the run. The random arm motions and base pushes come in only after
+the gait has formed (``disturbance_ramp``).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from dynpush.kernels.locomotion import CONSTRAINT_GROUPS
 from dynpush.sim.config import ConfigError
 from dynpush.sim.locomotion_config import LocomotionEnvConfig
 
+from .schedules import DisturbanceRampConfig
 from .train import PRESETS, NetworkConfig, PPOConfig, _from_dict, rsl_rl_runner_cfg
 
 
@@ -37,6 +39,9 @@ class LocomotionTrainConfig:
                                                                           critic_hidden=(512, 256, 128)))  # legged_gym
     p_max: dict[str, tuple[float, float]] = field(default_factory=_cat_p_max)
     p_max_ramp_fraction: float = 0.5  # of the run over which p_max goes from initial to final
+    # Iterations (start, end) over which the random arm motions and base pushes grow from none to their full
+    # size (ours, schedules.DisturbanceRampConfig): loco8 walked at ~200 iterations without them.
+    disturbance_ramp: tuple[int, int] = (300, 600)
 
     @staticmethod
     def preset_config(name: str) -> LocomotionTrainConfig:
@@ -62,6 +67,9 @@ class LocomotionTrainConfig:
                 raise ConfigError(f"p_max[{name!r}] must be (initial, final) within [0, 1], got {pair!r}")
         if not 0.0 <= self.p_max_ramp_fraction <= 1.0:
             raise ConfigError(f"p_max_ramp_fraction must lie in [0, 1], got {self.p_max_ramp_fraction!r}")
+        if len(self.disturbance_ramp) != 2:
+            raise ConfigError(f"disturbance_ramp must be (start, end) iterations, got {self.disturbance_ramp!r}")
+        DisturbanceRampConfig(*self.disturbance_ramp).validate()
         if self.ppo.schedule not in ("adaptive", "fixed"):
             raise ConfigError(f"ppo.schedule must be 'adaptive' or 'fixed', got {self.ppo.schedule!r}")
         return self
@@ -71,7 +79,8 @@ class LocomotionTrainConfig:
 
     @staticmethod
     def from_dict(data: dict) -> LocomotionTrainConfig:
-        return _from_dict(LocomotionTrainConfig, data)
+        # Runs from before the ramp existed had their full disturbances from the first iteration.
+        return _from_dict(LocomotionTrainConfig, {"disturbance_ramp": (0, 0), **data})
 
     def make_env(self, env: LocomotionEnvConfig):
         from dynpush.sim.locomotion_env import LocomotionEnv
@@ -87,5 +96,6 @@ class LocomotionTrainConfig:
                 "reach": None,
                 "constraints": {"p_max": {name: tuple(pair) for name, pair in self.p_max.items()},
                                 "ramp_iterations": int(self.p_max_ramp_fraction * self.iterations)},
+                "disturbance": dict(zip(("start_iteration", "end_iteration"), self.disturbance_ramp)),
             },
         }

@@ -21,14 +21,15 @@ from dynpush.policies.cat_ppo import CaTPPO
 from dynpush.policies.curriculum import GoalCurriculumConfig
 from dynpush.policies.progress import ProgressLogger
 from dynpush.policies.expert_regularization import ExpertImitationLoss
-from dynpush.policies.schedules import ScheduleConfig, imitation_weight_at, p_max_at, reach_weight_at
+from dynpush.policies.schedules import ScheduleConfig, disturbance_scale_at, imitation_weight_at, p_max_at, reach_weight_at
 
 
 class CaTOnPolicyRunner(OnPolicyRunner):
     """On-policy runner for CaT-PPO with per-iteration schedules and exact resume.
 
     The environment must provide ``env.constraint_groups`` (``(name, dim)`` in column order), ``extras["constraints"]``
-    every step, ``env.set_reward_weight(name, weight)`` (unless the schedule has no reach weight) and ``env.state_dict()`` / ``env.load_state_dict()``.
+    every step, ``env.set_reward_weight(name, weight)`` (unless the schedule has no reach weight),
+    ``env.set_disturbance_scale(scale)`` (if it has a disturbance ramp) and ``env.state_dict()`` / ``env.load_state_dict()``.
     ``train_cfg`` is rsl_rl's runner config; its optional ``"schedule"`` entry holds
     :class:`~dynpush.policies.schedules.ScheduleConfig` fields as a nested dict, and ``train_cfg["algorithm"]["class_name"]``
     defaults to :class:`CaTPPO`.
@@ -78,8 +79,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         super().learn(num_learning_iterations, init_at_random_ep_len)
 
     def apply_schedules(self, iteration: int, total_iterations: int) -> None:
-        """Set ``p_max``, the reach-reward weight and the imitation weight for ``iteration`` of a run of
-        ``total_iterations``."""
+        """Set ``p_max``, the reach-reward weight, the imitation weight and the disturbance scale for ``iteration``
+        of a run of ``total_iterations``."""
         self.alg.set_p_max(p_max_at(iteration, total_iterations, self.schedule_cfg, self.env.constraint_groups))
         if self.schedule_cfg.reach is not None:
             self.env.set_reward_weight("reach", reach_weight_at(iteration, total_iterations, self.schedule_cfg))
@@ -87,6 +88,10 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             weight = imitation_weight_at(iteration, total_iterations, self.imitation_weight)
             self.alg.symmetry.mirror_loss_coeff = weight
             self.logger.run_state["/imitation/weight"] = weight
+        if self.schedule_cfg.disturbance is not None:
+            scale = disturbance_scale_at(iteration, self.schedule_cfg.disturbance)
+            self.env.set_disturbance_scale(scale)
+            self.logger.run_state["/curriculum/disturbance_scale"] = scale
 
     def apply_curriculum(self, fresh_run: bool) -> None:
         """Sets the goal difficulty from the success rate of the episodes that ended since the last call."""

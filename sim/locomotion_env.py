@@ -108,6 +108,7 @@ class LocomotionEnv(EnvBase, VecEnv):
         p.arm_interval = steps(rnd.arm_interval_s)
         p.push_interval = steps(rnd.push_interval_s)
         p.push_velocity = rnd.push_velocity
+        p.disturbance_scale = f32([1.0])
         p.start_height = cfg.start_height
         p.leg_position_noise = rnd.leg_position_noise
         self.params = p
@@ -148,6 +149,13 @@ class LocomotionEnv(EnvBase, VecEnv):
         for name, size in k.POLICY_TERMS:
             scales += [cfg.noise.half_width(name)] * size
         self.noise_scale = f32(scales)
+
+    def set_disturbance_scale(self, scale: float) -> None:
+        """Scales the random arm motions and base pushes (``randomization.arm_amplitude``, ``push_velocity``) by
+        ``scale`` in [0, 1] from their next draw on; the training curriculum's (``schedules.disturbance_scale_at``)."""
+        if not 0.0 <= scale <= 1.0:
+            raise ValueError(f"disturbance scale must lie in [0, 1], got {scale!r}")
+        self.params.disturbance_scale.fill_(scale)
 
     # ------------------------------------------------------------------ the step
     def _launch(self, kernel, inputs) -> None:

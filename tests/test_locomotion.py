@@ -43,7 +43,8 @@ def robot_contract():
 def locomotion_run(tmp_path_factory):
     """Two CaT-PPO iterations on 16 legged worlds with small networks, exported to locomotion.onnx."""
     run = tmp_path_factory.mktemp("locomotion") / "run"
-    cfg = LocomotionTrainConfig(env=LocomotionEnvConfig(num_envs=16), iterations=2, num_steps_per_env=8, save_interval=1)
+    cfg = LocomotionTrainConfig(env=LocomotionEnvConfig(num_envs=16), iterations=2, num_steps_per_env=8, save_interval=1,
+                                disturbance_ramp=(0, 2))
     cfg.network = dataclasses.replace(cfg.network, actor_hidden=(32, 16), critic_hidden=(32, 16))
     torch.manual_seed(0)
     train(cfg, run)
@@ -107,6 +108,11 @@ def test_runtime_observation_equals_the_warp_kernel(locomotion_run, robot_contra
             start += size
 
 
+def test_the_runner_ramps_the_disturbances(locomotion_run):
+    progress = [json.loads(line) for line in (locomotion_run[0] / "progress.jsonl").read_text().splitlines()]
+    assert [row["/curriculum/disturbance_scale"] for row in progress] == [0.0, 0.5]
+
+
 def test_locomotion_env_state_round_trip():
     """state_dict / load_state_dict continue the simulation exactly (resumed training)."""
     env = LocomotionEnv(LocomotionEnvConfig(num_envs=4, seed=5))
@@ -123,6 +129,8 @@ def test_locomotion_env_state_round_trip():
     assert env.constraints_t.shape == (4, loco.NUM_CONSTRAINTS)
     with pytest.raises(ValueError, match="same num_envs"):
         env.load_state_dict({**saved, "task.command": np.zeros((5, 6), np.float32)})
+    with pytest.raises(ValueError, match=r"disturbance scale must lie in \[0, 1\], got 1.5"):
+        env.set_disturbance_scale(1.5)
 
 
 def test_legged_push_env_runs_the_locomotion_policy_and_constrains_simulated_leg_torques(locomotion_run):

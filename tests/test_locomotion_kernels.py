@@ -9,6 +9,7 @@ that the kernels must go through the index arrays. All launches run on the CPU d
 import math
 
 import numpy as np
+import pytest
 import warp as wp
 
 from dynpush.kernels import locomotion as k
@@ -94,7 +95,7 @@ def loco_params(rng, **overrides):
         action_scale=0.4, clip=2.5, command_lower=[-1.0, -0.5, -0.8, -0.3, -0.2, 0.3],
         command_upper=[1.5, 0.5, 0.8, 0.3, 0.25, 0.6], standing_probability=0.25, command_interval=(100.0, 200.0),
         arm_amplitude=0.8, arm_interval=(50.0, 150.0), push_interval=(300.0, 400.0), push_velocity=0.5,
-        start_height=0.55, leg_position_noise=0.1,
+        start_height=0.55, leg_position_noise=0.1, disturbance_scale=[1.0],
     )
     values.update(overrides)
     return make_struct(k.LocomotionParams, **values), as_f32({n: np.asarray(v) for n, v in values.items()})
@@ -375,7 +376,9 @@ def check_commands(u, p, label):
         assert x.min() < lo + 0.05 * (hi - lo) and x.max() > hi - 0.05 * (hi - lo), f"{label}: command {i} spread"
 
 
-def test_apply_events():
+@pytest.mark.parametrize("scale", [1.0, 0.5])
+def test_apply_events(scale):
+    """``scale``: the disturbance curriculum's share of the arm amplitude (0.8 rad) and push velocity (0.5 m/s)."""
     rng = np.random.default_rng(8)
     n = 6000
     view_np, task_np = random_scene(rng, n)
@@ -383,7 +386,8 @@ def test_apply_events():
     for name in ("next_command_step", "next_arm_step", "next_push_step"):
         task_np[name] = step + rng.integers(-2, 3, n)
     cmd, arm, push = (step >= task_np[name] for name in ("next_command_step", "next_arm_step", "next_push_step"))
-    params, p = loco_params(rng)
+    params, p = loco_params(rng, disturbance_scale=[scale])
+    amplitude, push_velocity = 0.8 * scale, 0.5 * scale
     view, task = structs(view_np, task_np)
     launch(k.apply_events, n, 5, params, view, task)
     out = read(k.LocomotionTask, task)
@@ -404,10 +408,12 @@ def test_apply_events():
     target, default = out["arm_target"][arm], p["arm_default"]
     lo, hi = p["arm_lower"][:5], p["arm_upper"][:5]
     dev = target[:, :5] - default[:5]
-    assert (np.abs(dev) <= 0.8 + 1e-6).all() and dev.min() < -0.79 and dev.max() > 0.79, "within default +- amplitude"
+    assert (np.abs(dev) <= amplitude + 1e-6).all() and dev.min() < -0.99 * amplitude and dev.max() > 0.99 * amplitude, \
+        "within default +- amplitude"
     assert ((target[:, :5] >= lo) & (target[:, :5] <= hi)).all(), "clipped to the limits"
     at_lo, at_hi = (target[:, :5] == lo).mean(0), (target[:, :5] == hi).mean(0)
-    expect_lo, expect_hi = np.maximum(lo - (default[:5] - 0.8), 0) / 1.6, np.maximum(default[:5] + 0.8 - hi, 0) / 1.6
+    expect_lo = np.maximum(lo - (default[:5] - amplitude), 0) / (2 * amplitude)
+    expect_hi = np.maximum(default[:5] + amplitude - hi, 0) / (2 * amplitude)
     close(at_lo, expect_lo, atol=0.04, err_msg="share of targets clipped at the lower limit")
     close(at_hi, expect_hi, atol=0.04, err_msg="share of targets clipped at the upper limit")
     close(target[:, 5], np.full(arm.sum(), default[5]), atol=0, err_msg="6th arm joint at its default")
@@ -416,6 +422,6 @@ def test_apply_events():
     dv = after - before
     np.testing.assert_array_equal(dv[~push], 0.0, err_msg="joint_qd of worlds without a push")
     np.testing.assert_array_equal(dv[:, 2:], 0.0, err_msg="only the linear xy free-joint velocity changes")
-    assert (np.abs(dv[push, :2]) <= 0.5 + 1e-5).all() and (np.abs(dv[push, :2]) > 0).mean() > 0.99
-    assert np.abs(dv[push, :2]).max() > 0.49
+    assert (np.abs(dv[push, :2]) <= push_velocity + 1e-5).all() and (np.abs(dv[push, :2]) > 0).mean() > 0.99
+    assert np.abs(dv[push, :2]).max() > 0.98 * push_velocity
     close(view.joint_q.numpy(), view_np["joint_q"], atol=0, err_msg="joint_q untouched")

@@ -1,9 +1,13 @@
-"""Schedules of the push task: p_max curricula and the reach-reward weight (Table "Rewards and constraints")."""
+"""Training schedules: the push task's p_max curricula and reach-reward weight (Table "Rewards and constraints"),
+the locomotion task's disturbance ramp."""
 
 import pytest
 import torch
 
-from dynpush.policies.schedules import CONSTRAINT_GROUPS, ScheduleConfig, p_max_at, reach_weight_at
+from dynpush.policies.locomotion_train import LocomotionTrainConfig
+from dynpush.policies.schedules import (CONSTRAINT_GROUPS, DisturbanceRampConfig, ScheduleConfig, disturbance_scale_at,
+                                        p_max_at, reach_weight_at)
+from dynpush.sim.config import ConfigError
 
 torch.set_num_threads(1)
 
@@ -90,3 +94,23 @@ def test_from_dict_overrides_and_custom_groups():
     assert cfg.scale_with_run_length and cfg.paper_iterations == 20000
     torch.testing.assert_close(p_max_at(5, 20000, cfg, groups=[("a", 2)]), torch.tensor([0.5, 0.5]))
     assert reach_weight_at(0, 20000, cfg) == 2.0
+
+
+def test_disturbance_ramp():
+    ramp = DisturbanceRampConfig(start_iteration=100, end_iteration=300)
+    assert [disturbance_scale_at(i, ramp) for i in (0, 99, 100, 200, 250, 299, 300, 5000)] == \
+        [0.0, 0.0, 0.0, 0.5, 0.75, pytest.approx(0.995), 1.0, 1.0]
+    assert disturbance_scale_at(0, DisturbanceRampConfig()) == 1.0, "(0, 0): full disturbances from the start"
+    assert ScheduleConfig.from_dict({"disturbance": {"start_iteration": 1, "end_iteration": 2}}).disturbance == \
+        DisturbanceRampConfig(1, 2)
+    assert ScheduleConfig.from_dict({}).disturbance is None
+
+
+def test_disturbance_ramp_in_the_locomotion_config():
+    cfg = LocomotionTrainConfig(disturbance_ramp=(300, 600)).validate()
+    assert ScheduleConfig.from_dict(cfg.runner_cfg()["schedule"]).disturbance == DisturbanceRampConfig(300, 600)
+    with pytest.raises(ConfigError, match=r"disturbance_ramp must be \(start, end\) iterations with 0 <= start <= end"):
+        LocomotionTrainConfig(disturbance_ramp=(600, 300)).validate()
+    old_run = cfg.to_dict()
+    del old_run["disturbance_ramp"]
+    assert LocomotionTrainConfig.from_dict(old_run).disturbance_ramp == (0, 0), "runs from before the ramp had it off"

@@ -52,7 +52,8 @@ def _eval_locomotion(args: argparse.Namespace) -> int:
     from .locomotion_eval import LocomotionEvalConfig, evaluate_locomotion
 
     policy = Path(args.policy)
-    cfg = LocomotionEvalConfig(num_envs=args.num_envs or 256, seconds=args.seconds, seed=args.seed, noise=args.noise)
+    cfg = LocomotionEvalConfig(num_envs=args.num_envs or 256, seconds=args.seconds, seed=args.seed, noise=args.noise,
+                               overrides=tuple(args.set or ()))
     out = Path(args.out) if args.out else policy.parent / "locomotion_eval"
     result = evaluate_locomotion(policy, cfg, out)
     print("tracking RMS error: " + ", ".join(f"{name} {value:.3f} {result['units'][name]}"

@@ -1,7 +1,8 @@
 """Evaluation of a locomotion policy (``dynpush eval locomotion.onnx``): command tracking per component.
 
 Every world draws one command of the training distribution (``LocomotionEnvConfig.commands``) and holds it
-for ``seconds``; the random arm motions, base pushes and base masses of training go on. After ``settle_s``
+for ``seconds``; the random arm motions, base pushes and base masses of training go on (at their full size,
+past any training ramp; ``overrides`` changes them). After ``settle_s``
 the tracking error ``command - measured`` of each component (vx, vy in the heading frame [m/s], yaw rate
 [rad/s], roll, pitch [rad], height [m]; ``LocomotionEnv.tracking_error_t``) is collected in every step of
 the worlds that have not fallen. Writes ``locomotion_eval.json`` (RMS and mean absolute error per
@@ -19,9 +20,11 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from dynpush.sim.config import ConfigError
 from dynpush.sim.locomotion_env import COMMAND_NAMES, CONSTRAINT_GROUPS, LocomotionEnv
 
 from .locomotion_train import LocomotionTrainConfig
+from .train import apply_overrides
 
 UNITS = ("m/s", "m/s", "rad/s", "rad", "rad", "m")
 
@@ -33,6 +36,9 @@ class LocomotionEvalConfig:
     settle_s: float = 2.0  # excluded after the command is given
     seed: int = 0
     noise: bool | None = None  # observation noise (None: as in training)
+    # ``env.*`` overrides of the training config (``--set``), e.g. the task's full disturbances for a run that
+    # trained with fewer: env.randomization.arm_amplitude=0.8 env.randomization.push_velocity=0.5
+    overrides: tuple[str, ...] = ()
 
 
 def evaluate_locomotion(path: Path, cfg: LocomotionEvalConfig, out_dir: Path) -> dict:
@@ -42,7 +48,10 @@ def evaluate_locomotion(path: Path, cfg: LocomotionEvalConfig, out_dir: Path) ->
     if not 0.0 <= cfg.settle_s < cfg.seconds:
         raise ValueError(f"settle_s must lie in [0, seconds), got {cfg.settle_s} with seconds {cfg.seconds}")
     network = LocomotionNetwork(str(path))
-    env_cfg = LocomotionTrainConfig.from_dict(network.contract["training_config"]).env
+    for item in cfg.overrides:
+        if not item.startswith("env."):
+            raise ConfigError(f"a locomotion evaluation takes env.* overrides only, got {item!r}")
+    env_cfg = apply_overrides(LocomotionTrainConfig.from_dict(network.contract["training_config"]), list(cfg.overrides)).env
     env_cfg.num_envs, env_cfg.seed, env_cfg.randomize_first_episode_length = cfg.num_envs, cfg.seed, False
     env_cfg.episode_length_s = cfg.seconds + env_cfg.control_dt  # no time-out inside the evaluation
     if cfg.noise is not None:
@@ -65,19 +74,21 @@ def evaluate_locomotion(path: Path, cfg: LocomotionEvalConfig, out_dir: Path) ->
                 errors[t - settle] = env.tracking_error_t.numpy()
                 counted[t - settle] = alive
                 violated += env.violated_groups_t.numpy()[alive].sum(axis=0)
-    summary = _summary(path, cfg, commands, errors, counted, alive, violated)
+    summary = _summary(path, cfg, env_cfg, commands, errors, counted, alive, violated)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "locomotion_eval.json").write_text(json.dumps(summary, indent=1))
     _plot(commands, errors, counted, summary, out_dir / "locomotion_eval.png")
     return summary
 
 
-def _summary(path, cfg, commands, errors, counted, alive, violated) -> dict:
+def _summary(path, cfg, env_cfg, commands, errors, counted, alive, violated) -> dict:
     e = errors[counted]  # (samples, 6)
     samples = max(int(counted.sum()), 1)
     return {
         "policy": str(path),
         "worlds": cfg.num_envs, "seconds_per_command": cfg.seconds, "settle_s": cfg.settle_s, "seed": cfg.seed,
+        "overrides": list(cfg.overrides),
+        "arm_amplitude_rad": env_cfg.randomization.arm_amplitude, "push_velocity_m_s": env_cfg.randomization.push_velocity,
         "fell_percent": 100.0 * float((~alive).mean()),
         "tracking_rms": {name: float(np.sqrt(np.mean(e[:, i] ** 2))) for i, name in enumerate(COMMAND_NAMES)},
         "tracking_mean_abs": {name: float(np.mean(np.abs(e[:, i]))) for i, name in enumerate(COMMAND_NAMES)},
@@ -110,6 +121,7 @@ def _plot(commands, errors, counted, summary, out: Path) -> None:
         ax.grid(alpha=0.3)
     axes[0, 0].legend(loc="upper left")
     fig.suptitle(f"Locomotion tracking: {summary['worlds']} worlds, {summary['seconds_per_command']:.0f} s per command,"
+                 f" arm motions +-{summary['arm_amplitude_rad']:.2f} rad, pushes {summary['push_velocity_m_s']:.2f} m/s,"
                  f" {summary['fell_percent']:.1f} % fell ({Path(summary['policy']).name})")
     fig.tight_layout()
     fig.savefig(out, dpi=110)

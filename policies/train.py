@@ -100,6 +100,9 @@ class TrainConfig:
     def validate(self) -> TrainConfig:
         self.env.validate()
         self.curriculum.validate()
+        if self.env.legged.enabled and not self.env.legged.locomotion_policy:
+            raise ConfigError("env.legged.locomotion_policy must name a locomotion.onnx to train in legged mode"
+                              " (without one the legs hold their default targets)")
         if not isinstance(self.critic_warmup_iterations, int) or self.critic_warmup_iterations < 0:
             raise ConfigError(f"critic_warmup_iterations must be an integer >= 0, got {self.critic_warmup_iterations!r}")
         for name in ("iterations", "num_steps_per_env", "save_interval"):
@@ -123,11 +126,12 @@ class TrainConfig:
         return dataclasses.asdict(self)
 
     def make_env(self, env: PushEnvConfig):
-        from dynpush.sim.push_env import PushEnv
+        """The push environment of ``env`` (tracked base, or the legged robot with ``env.legged.enabled``)."""
+        from dynpush.sim.push_env import make_push_env
 
         from .expert_regularization import ExpertLabelledEnv
 
-        return ExpertLabelledEnv(PushEnv(env)) if max(self.imitation_weight) > 0 else PushEnv(env)
+        return ExpertLabelledEnv(make_push_env(env)) if max(self.imitation_weight) > 0 else make_push_env(env)
 
     @staticmethod
     def from_dict(data: dict) -> TrainConfig:

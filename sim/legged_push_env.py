@@ -128,6 +128,16 @@ class LeggedPushEnv(PushEnv):
             self._physics_and_task()
         self._graph = capture.graph
 
+    # ------------------------------------------------------------------ checkpointing
+    def _state_arrays(self) -> dict[str, wp.array]:
+        """The push task's state, the locomotion task's (its command is the push task's base command) and the
+        last leg actions and observation, and MuJoCo's warm start."""
+        arrays = super()._state_arrays()
+        arrays |= {f"leg_task.{name}": getattr(self.leg_task, name) for name in loco.LocomotionTask.vars if name != "command"}
+        arrays["leg_actions"], arrays["leg_obs"] = self.leg_actions, self.leg_obs
+        arrays["mujoco.qacc_warmstart"] = self.solver.mjw_data.qacc_warmstart
+        return arrays
+
     # ------------------------------------------------------------------ the step
     def _drive_base(self, view, state) -> None:
         """The legs carry the base: no tracking wrench."""

@@ -165,6 +165,34 @@ def test_legged_push_env_runs_the_locomotion_policy_and_constrains_simulated_leg
     PushEnvConfig(legged=LeggedModeConfig(mujoco=MuJoCoConfig(nconmax=24, njmax=64))).validate()  # unused when disabled
 
 
+def test_legged_push_training_env_state_round_trip(locomotion_run):
+    """Training in legged mode builds the legged environment, and its state_dict continues it exactly (resume)."""
+    from dynpush.policies.train import TrainConfig
+    from dynpush.sim.legged_push_env import LeggedPushEnv
+
+    _, path = locomotion_run
+    cfg = TrainConfig.preset_config("cpu")
+    cfg.env = PushEnvConfig(num_envs=2, seed=3, legged=LeggedModeConfig(enabled=True, locomotion_policy=str(path)))
+    env = cfg.make_env(cfg.env)
+    assert isinstance(env, LeggedPushEnv)
+    torch.manual_seed(0)
+    actions = [torch.randn(2, 11) for _ in range(8)]
+    for a in actions[:4]:
+        env.step(a)
+    saved = env.state_dict()
+    assert {"leg_task.foot_air_time", "leg_actions", "mujoco.qacc_warmstart"} <= set(saved)
+    first = [env.step(a)[0]["critic"].clone() for a in actions[4:]]
+    legs_first = env.leg_obs.numpy().copy()
+    env.load_state_dict(saved)
+    again = [env.step(a)[0]["critic"].clone() for a in actions[4:]]
+    for a, b in zip(first, again):
+        torch.testing.assert_close(a, b)
+    np.testing.assert_array_equal(env.leg_obs.numpy(), legs_first)
+    cfg.env = PushEnvConfig(legged=LeggedModeConfig(enabled=True))
+    with pytest.raises(ConfigError, match="env.legged.locomotion_policy must name a locomotion.onnx to train in legged mode"):
+        cfg.validate()
+
+
 def test_sim2sim_with_the_runtime_running_the_locomotion_onnx(locomotion_run, robot_contract, tmp_path):
     """``dynpush sim2sim --locomotion onnx``: the runtime runs both networks and sends 17 joint targets; the legged
     simulator applies the leg targets and reports its leg joints, which the next locomotion observation uses."""

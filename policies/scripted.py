@@ -14,16 +14,17 @@ own 11 actions (6D base command and 5 arm joints about their defaults):
    but brings the elbow onto the object). The push is steered on the measured
    end-effector position, not the base's: under load the arm deflects by up to ~0.25 m. The base's
    sideways velocity and yaw rate keep the end-effector on the contact point as the object turns. The
-   contact is shifted sideways by ``yaw_gain`` per radian of yaw error (at most ``max_offset`` of the
-   face). A push that misses the centre of mass turns the object, so the yaw is steered toward the
+   contact is on the line of push through the object's centre of mass (read from the task: the
+   randomised offset reaches a quarter of the object's size), shifted sideways by ``yaw_gain`` per
+   radian of yaw error (within ``max_offset`` of the face). A push that misses the centre of mass turns the object, so the yaw is steered toward the
    goal's while the object moves.
 3. **Turn**: within ``turn_radius`` of the goal with the yaw still off, push along the robot's heading
    at the largest offset, slowly, which turns the object more than it moves it.
 4. **Release**: at the goal (position and yaw within ``0.6`` of the success tolerances) back away.
 
 The controller has no memory: its action is a function of the current state, so that a memoryless
-policy can imitate it. The object's dimensions and shape are read from the task (a privileged input no
-policy observes).
+policy can imitate it. The object's dimensions, shape and centre of mass are read from the task
+(privileged inputs no policy observes).
 """
 
 from __future__ import annotations
@@ -96,6 +97,13 @@ class ScriptedPusher:
         cylinder = shape == 1
         return np.where(cylinder, 0.5 * dims[:, 0], depth), np.where(cylinder, 0.5 * dims[:, 0], width)
 
+    def _com_across(self, side_dir: np.ndarray, object_yaw: np.ndarray) -> np.ndarray:
+        """Offset [m] of the object's centre of mass from its frame origin along ``side_dir`` (unit, world xy)."""
+        com_o = self.env.task.object_com_o.numpy()[:, :2]
+        c, s = np.cos(object_yaw), np.sin(object_yaw)
+        com_w = np.stack([c * com_o[:, 0] - s * com_o[:, 1], s * com_o[:, 0] + c * com_o[:, 1]], axis=1)
+        return (com_w * side_dir).sum(1)
+
     def __call__(self, observations: np.ndarray) -> np.ndarray:
         """Actions of every world from the true state (``observations`` unused: a policy's call signature)."""
         from dynpush.policies.evaluate import yaw_of
@@ -113,9 +121,11 @@ class ScriptedPusher:
         push_dir = np.where(turning[:, None], heading_dir, to_goal / np.maximum(distance[:, None], 1e-6))
         side_dir = np.stack([-push_dir[:, 1], push_dir[:, 0]], axis=1)  # push_dir turned +90 deg
         depth, half_width = self._half_extent(-push_dir, yaw_obj)
-        # A contact offset s along side_dir turns the object by -s x push force: steer with s ~ -yaw error.
+        # A contact offset s along side_dir from the line through the centre of mass turns the object by
+        # -s x push force: steer with s ~ -yaw error (the push through the centre of mass goes straight).
+        com_lateral = self._com_across(side_dir, yaw_obj)
         max_offset = cfg.max_offset * half_width
-        offset = np.clip(-cfg.yaw_gain * yaw_error, -max_offset, max_offset)
+        offset = np.clip(com_lateral - cfg.yaw_gain * yaw_error, -max_offset, max_offset)
         offset = np.where(turning, -np.sign(yaw_error) * max_offset, offset)
         contact = p_obj - push_dir * depth[:, None] + side_dir * offset[:, None]
         heading = np.arctan2(push_dir[:, 1], push_dir[:, 0])

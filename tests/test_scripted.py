@@ -22,6 +22,18 @@ def box_ray_exit(dims_xy: np.ndarray, yaw: float, direction: np.ndarray) -> tupl
     return float(t[axis]), float(half[1 - axis])
 
 
+def test_centre_of_mass_across_the_push(small_env):
+    """Independent reference: the object-frame CoM turned by the object's yaw with a rotation matrix, projected."""
+    env, rng = small_env, np.random.default_rng(5)
+    pusher = ScriptedPusher(env)
+    com = rng.uniform(-0.2, 0.2, (env.num_envs, 3)).astype(np.float32)
+    env.task.object_com_o.assign(com)
+    yaw, angle = rng.uniform(-math.pi, math.pi, env.num_envs), rng.uniform(-math.pi, math.pi, env.num_envs)
+    side = np.column_stack([np.cos(angle), np.sin(angle)])
+    expected = [np.array([[math.cos(y), -math.sin(y)], [math.sin(y), math.cos(y)]]) @ c[:2] @ d for y, c, d in zip(yaw, com, side)]
+    np.testing.assert_allclose(pusher._com_across(side, yaw), expected, rtol=1e-5, atol=1e-7)
+
+
 def test_half_extent_matches_ray_box_exit(small_env):
     env = small_env
     pusher = ScriptedPusher(env)

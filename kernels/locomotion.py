@@ -116,7 +116,7 @@ class LocomotionParams:
     command_upper: wp.array(dtype=float)  # (6,)
     standing_probability: float  # share of commands with zero vx, vy and yaw rate
     command_interval: wp.vec2  # [steps] between command changes
-    arm_amplitude: float  # [rad] arm targets uniform within default +- amplitude (clipped to the limits)
+    arm_amplitude: wp.array(dtype=float)  # (5,) [rad] arm targets uniform within default +- amplitude (clipped to the limits)
     arm_interval: wp.vec2  # [steps] between arm target changes
     push_interval: wp.vec2  # [steps] between base pushes
     push_velocity: float  # [m/s] max horizontal velocity change of a push
@@ -210,8 +210,8 @@ def sample_command(rng: wp.uint32, params: LocomotionParams, task: LocomotionTas
 @wp.func
 def sample_arm_target(rng: wp.uint32, params: LocomotionParams, task: LocomotionTask, w: int):
     """A new arm target for world ``w``; ``rng``: a forked stream (``frames.fork_rng``)."""
-    amplitude = params.arm_amplitude * params.disturbance_scale[0]
     for j in range(NUM_ARM_JOINTS):
+        amplitude = params.arm_amplitude[j] * params.disturbance_scale[0]
         target = params.arm_default[j] + wp.randf(rng, -amplitude, amplitude)
         task.arm_target[w, j] = wp.clamp(target, params.arm_lower[j], params.arm_upper[j])
     task.arm_target[w, NUM_ARM_JOINTS] = params.arm_default[NUM_ARM_JOINTS]

@@ -37,7 +37,7 @@ class LocomotionEvalConfig:
     seed: int = 0
     noise: bool | None = None  # observation noise (None: as in training)
     # ``env.*`` overrides of the training config (``--set``), e.g. the task's full disturbances for a run that
-    # trained with fewer: env.randomization.arm_amplitude=0.8 env.randomization.push_velocity=0.5
+    # trained with fewer: "env.randomization.arm_amplitude=(0.2, 0.6, 0.9, 0.2, 0.5)" env.randomization.push_velocity=0.5
     overrides: tuple[str, ...] = ()
 
 
@@ -88,7 +88,7 @@ def _summary(path, cfg, env_cfg, commands, errors, counted, alive, violated) -> 
         "policy": str(path),
         "worlds": cfg.num_envs, "seconds_per_command": cfg.seconds, "settle_s": cfg.settle_s, "seed": cfg.seed,
         "overrides": list(cfg.overrides),
-        "arm_amplitude_rad": env_cfg.randomization.arm_amplitude, "push_velocity_m_s": env_cfg.randomization.push_velocity,
+        "arm_amplitude_rad": list(env_cfg.randomization.arm_amplitude), "push_velocity_m_s": env_cfg.randomization.push_velocity,
         "fell_percent": 100.0 * float((~alive).mean()),
         "tracking_rms": {name: float(np.sqrt(np.mean(e[:, i] ** 2))) for i, name in enumerate(COMMAND_NAMES)},
         "tracking_mean_abs": {name: float(np.mean(np.abs(e[:, i]))) for i, name in enumerate(COMMAND_NAMES)},
@@ -121,7 +121,7 @@ def _plot(commands, errors, counted, summary, out: Path) -> None:
         ax.grid(alpha=0.3)
     axes[0, 0].legend(loc="upper left")
     fig.suptitle(f"Locomotion tracking: {summary['worlds']} worlds, {summary['seconds_per_command']:.0f} s per command,"
-                 f" arm motions +-{summary['arm_amplitude_rad']:.2f} rad, pushes {summary['push_velocity_m_s']:.2f} m/s,"
+                 f" arm motions up to +-{max(summary['arm_amplitude_rad']):.2f} rad, pushes {summary['push_velocity_m_s']:.2f} m/s,"
                  f" {summary['fell_percent']:.1f} % fell ({Path(summary['policy']).name})")
     fig.tight_layout()
     fig.savefig(out, dpi=110)

@@ -79,8 +79,13 @@ class LocomotionTrainConfig:
 
     @staticmethod
     def from_dict(data: dict) -> LocomotionTrainConfig:
-        # Runs from before the ramp existed had their full disturbances from the first iteration.
-        return _from_dict(LocomotionTrainConfig, {"disturbance_ramp": (0, 0), **data})
+        # Runs from before the ramp existed had their full disturbances from the first iteration, and one arm
+        # amplitude for every joint.
+        data = {"disturbance_ramp": (0, 0), **data}
+        randomization = data.get("env", {}).get("randomization", {})
+        if isinstance(randomization.get("arm_amplitude"), (int, float)):
+            data["env"]["randomization"] = {**randomization, "arm_amplitude": (float(randomization["arm_amplitude"]),) * 5}
+        return _from_dict(LocomotionTrainConfig, data)
 
     def make_env(self, env: LocomotionEnvConfig):
         from dynpush.sim.locomotion_env import LocomotionEnv

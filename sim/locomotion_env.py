@@ -104,7 +104,7 @@ class LocomotionEnv(EnvBase, VecEnv):
         p.command_lower, p.command_upper = f32(cfg.commands.lower), f32(cfg.commands.upper)
         p.standing_probability = cfg.commands.standing_probability
         p.command_interval = steps(cfg.commands.resample_interval_s)
-        p.arm_amplitude = rnd.arm_amplitude
+        p.arm_amplitude = f32(rnd.arm_amplitude)
         p.arm_interval = steps(rnd.arm_interval_s)
         p.push_interval = steps(rnd.push_interval_s)
         p.push_velocity = rnd.push_velocity

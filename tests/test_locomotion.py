@@ -219,10 +219,10 @@ def test_sim2sim_with_the_runtime_running_the_locomotion_onnx(locomotion_run, ro
 def test_eval_of_a_locomotion_onnx_writes_tracking_errors_under_the_requested_disturbances(locomotion_run, tmp_path, capsys):
     _, path = locomotion_run
     main(["eval", str(path), "--num-envs", "4", "--seconds", "2.1", "--out", str(tmp_path),
-          "--set", "env.randomization.arm_amplitude=0.3"])
+          "--set", "env.randomization.arm_amplitude=(0.3, 0.3, 0.3, 0.3, 0.1)"])
     summary = json.loads((tmp_path / "locomotion_eval.json").read_text())
-    assert summary["arm_amplitude_rad"] == 0.3 and summary["push_velocity_m_s"] == 0.5
-    assert summary["overrides"] == ["env.randomization.arm_amplitude=0.3"]
+    assert summary["arm_amplitude_rad"] == [0.3, 0.3, 0.3, 0.3, 0.1] and summary["push_velocity_m_s"] == 0.5
+    assert summary["overrides"] == ["env.randomization.arm_amplitude=(0.3, 0.3, 0.3, 0.3, 0.1)"]
     assert set(summary["tracking_rms"]) == {"vx", "vy", "yaw_rate", "roll", "pitch", "height"}
     assert all(np.isfinite(v) and v > 0 for v in summary["tracking_rms"].values())
     assert (tmp_path / "locomotion_eval.png").read_bytes()[:4] == b"\x89PNG"

@@ -113,4 +113,7 @@ def test_disturbance_ramp_in_the_locomotion_config():
         LocomotionTrainConfig(disturbance_ramp=(600, 300)).validate()
     old_run = cfg.to_dict()
     del old_run["disturbance_ramp"]
-    assert LocomotionTrainConfig.from_dict(old_run).disturbance_ramp == (0, 0), "runs from before the ramp had it off"
+    old_run["env"]["randomization"]["arm_amplitude"] = 0.8
+    old = LocomotionTrainConfig.from_dict(old_run)
+    assert old.disturbance_ramp == (0, 0), "runs from before the ramp had it off"
+    assert old.env.randomization.arm_amplitude == (0.8,) * 5, "and one arm amplitude for all joints"

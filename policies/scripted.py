@@ -16,8 +16,8 @@ own 11 actions (6D base command and 5 arm joints about their defaults):
    sideways velocity and yaw rate keep the end-effector on the contact point as the object turns. The
    contact is on the line of push through the object's centre of mass (read from the task: the
    randomised offset reaches a quarter of the object's size), shifted sideways by ``yaw_gain`` per
-   radian of yaw error (within ``max_offset`` of the face). A push that misses the centre of mass turns the object, so the yaw is steered toward the
-   goal's while the object moves.
+   radian of yaw error (within ``max_offset`` of the face). A push that misses the centre of mass
+   turns the object, so the yaw is steered toward the goal's while the object moves.
 3. **Turn**: within ``turn_radius`` of the goal with the yaw still off, push along the robot's heading
    at the largest offset, slowly, which turns the object more than it moves it.
 4. **Release**: at the goal (position and yaw within ``0.6`` of the success tolerances) back away.

@@ -86,8 +86,9 @@ class LocomotionTrainConfig:
         # amplitude for every joint.
         data = {"disturbance_ramp": (0, 0), **data}
         randomization = data.get("env", {}).get("randomization", {})
-        if isinstance(randomization.get("arm_amplitude"), (int, float)):
-            data["env"]["randomization"] = {**randomization, "arm_amplitude": (float(randomization["arm_amplitude"]),) * 5}
+        if isinstance(randomization.get("arm_amplitude"), (int, float)):  # new dicts: the caller's stays as it is
+            amplitude = (float(randomization["arm_amplitude"]),) * 5
+            data["env"] = {**data["env"], "randomization": {**randomization, "arm_amplitude": amplitude}}
         return _from_dict(LocomotionTrainConfig, data)
 
     def make_env(self, env: LocomotionEnvConfig):

@@ -115,5 +115,6 @@ def test_disturbance_ramp_in_the_locomotion_config():
     del old_run["disturbance_ramp"]
     old_run["env"]["randomization"]["arm_amplitude"] = 0.8
     old = LocomotionTrainConfig.from_dict(old_run)
+    assert old_run["env"]["randomization"]["arm_amplitude"] == 0.8, "the saved config it read is left unchanged"
     assert old.disturbance_ramp == (0, 0), "runs from before the ramp had it off"
     assert old.env.randomization.arm_amplitude == (0.8,) * 5, "and one arm amplitude for all joints"

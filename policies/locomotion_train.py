@@ -105,6 +105,6 @@ class LocomotionTrainConfig:
                 "reach": None,
                 "constraints": {"p_max": {name: tuple(pair) for name, pair in self.p_max.items()},
                                 "ramp_iterations": int(self.p_max_ramp_fraction * self.iterations)},
-                "disturbance": dict(zip(("start_iteration", "end_iteration"), self.disturbance_ramp)),
+                "disturbance": dataclasses.asdict(DisturbanceRampConfig(*self.disturbance_ramp)),
             },
         }

@@ -155,12 +155,23 @@ threading.Thread(target=_stream, daemon=True).start()
 
 
 def free_ports(count: int) -> list[int]:
-    sockets = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(count)]
-    for s in sockets:
-        s.bind(("127.0.0.1", 0))
-    ports = [s.getsockname()[1] for s in sockets]
-    for s in sockets:
-        s.close()
+    """``count`` loopback UDP ports that are free now, drawn from below the kernel's ephemeral range.
+
+    A port closed here is bound again later by a runtime in another process; an ephemeral port could
+    meanwhile be handed to any socket bound to port 0 (the streaming robot's own sender, CI neighbours),
+    which made the runtime's startup fail with "address already in use" (seen once in CI)."""
+    ephemeral_low = int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    rng = np.random.default_rng()
+    ports: list[int] = []
+    while len(ports) < count:
+        port = int(rng.integers(1024, ephemeral_low))
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            try:
+                probe.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+        if port not in ports:
+            ports.append(port)
     return ports
 
 

@@ -6,7 +6,8 @@ past any training ramp; ``overrides`` changes them). After ``settle_s``
 the tracking error ``command - measured`` of each component (vx, vy in the heading frame [m/s], yaw rate
 [rad/s], roll, pitch [rad], height [m]; ``LocomotionEnv.tracking_error_t``) is collected in every step of
 the worlds that have not fallen. Writes ``locomotion_eval.json`` (RMS and mean absolute error per
-component, fall rate, share of steps with each constraint group violated) and ``locomotion_eval.png``
+component, fall rate, share of steps with each constraint group violated, and percentiles of each group's
+largest excess over its limit, which show how far a CaT limit sits from the gait) and ``locomotion_eval.png``
 (commanded vs achieved per component, one dot per world).
 """
 
@@ -27,6 +28,10 @@ from .locomotion_train import LocomotionTrainConfig
 from .train import apply_overrides
 
 UNITS = ("m/s", "m/s", "rad/s", "rad", "rad", "m")
+# Units of the constraint values (value - limit) of each group of CONSTRAINT_GROUPS.
+CONSTRAINT_UNITS = {"leg_joint_torque": "N m", "leg_joint_velocity": "rad/s", "leg_joint_acceleration": "rad/s^2",
+                    "leg_action_rate": "1/s", "collision": "m", "foot_air_time": "s"}
+EXCESS_PERCENTILES = (50, 90, 99)
 
 
 @dataclass
@@ -64,6 +69,8 @@ def evaluate_locomotion(path: Path, cfg: LocomotionEvalConfig, out_dir: Path) ->
     errors = np.zeros((steps - settle, cfg.num_envs, len(COMMAND_NAMES)))
     counted = np.zeros((steps - settle, cfg.num_envs), dtype=bool)
     violated = np.zeros(len(CONSTRAINT_GROUPS))
+    excess = np.zeros((steps - settle, cfg.num_envs, len(CONSTRAINT_GROUPS)))
+    group_starts = np.cumsum([0] + [size for _, size in CONSTRAINT_GROUPS])[:-1]
     with torch.inference_mode():
         for t in tqdm(range(steps), desc="locomotion eval", unit="step", dynamic_ncols=True):
             actions = torch.from_numpy(network(obs.numpy()))
@@ -74,15 +81,17 @@ def evaluate_locomotion(path: Path, cfg: LocomotionEvalConfig, out_dir: Path) ->
                 errors[t - settle] = env.tracking_error_t.numpy()
                 counted[t - settle] = alive
                 violated += env.violated_groups_t.numpy()[alive].sum(axis=0)
-    summary = _summary(path, cfg, env_cfg, commands, errors, counted, alive, violated)
+                excess[t - settle] = np.maximum.reduceat(env.constraints_t.numpy(), group_starts, axis=1)
+    summary = _summary(path, cfg, env_cfg, commands, errors, counted, alive, violated, excess)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "locomotion_eval.json").write_text(json.dumps(summary, indent=1))
     _plot(commands, errors, counted, summary, out_dir / "locomotion_eval.png")
     return summary
 
 
-def _summary(path, cfg, env_cfg, commands, errors, counted, alive, violated) -> dict:
-    e = errors[counted]  # (samples, 6)
+def _summary(path, cfg, env_cfg, commands, errors, counted, alive, violated, excess) -> dict:
+    """``excess``: (steps, worlds, groups) largest constraint value (value - limit) of each group per step."""
+    e, x = errors[counted], excess[counted]  # (samples, 6), (samples, groups)
     samples = max(int(counted.sum()), 1)
     return {
         "policy": str(path),
@@ -95,6 +104,9 @@ def _summary(path, cfg, env_cfg, commands, errors, counted, alive, violated) -> 
         "command_std": {name: float(commands[:, i].std()) for i, name in enumerate(COMMAND_NAMES)},
         "units": dict(zip(COMMAND_NAMES, UNITS)),
         "violated_percent_of_steps": {name: 100.0 * float(v) / samples for (name, _), v in zip(CONSTRAINT_GROUPS, violated)},
+        "largest_excess_percentiles": {name: {f"p{q}": float(np.percentile(x[:, g], q)) for q in EXCESS_PERCENTILES}
+                                       for g, (name, _) in enumerate(CONSTRAINT_GROUPS)},
+        "constraint_units": {name: CONSTRAINT_UNITS[name] for name, _ in CONSTRAINT_GROUPS},
         "samples": int(counted.sum()),
     }
 

@@ -225,6 +225,10 @@ def test_eval_of_a_locomotion_onnx_writes_tracking_errors_under_the_requested_di
     assert summary["overrides"] == ["env.randomization.arm_amplitude=(0.3, 0.3, 0.3, 0.3, 0.1)"]
     assert set(summary["tracking_rms"]) == {"vx", "vy", "yaw_rate", "roll", "pitch", "height"}
     assert all(np.isfinite(v) and v > 0 for v in summary["tracking_rms"].values())
+    for name, share in summary["violated_percent_of_steps"].items():  # two computations of the same steps agree
+        p50, p90, p99 = (summary["largest_excess_percentiles"][name][q] for q in ("p50", "p90", "p99"))
+        assert p50 <= p90 <= p99 and summary["constraint_units"][name]
+        assert (share >= 50.0 if p50 > 0 else share <= 50.0) and (share >= 1.0 if p99 > 0 else share <= 1.0), name
     assert (tmp_path / "locomotion_eval.png").read_bytes()[:4] == b"\x89PNG"
     assert main(["eval", str(path), "--out", str(tmp_path), "--set", "ppo.learning_rate=0.1"]) == 2
     assert "a locomotion evaluation takes env.* overrides only, got 'ppo.learning_rate=0.1'" in capsys.readouterr().err

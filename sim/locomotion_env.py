@@ -20,6 +20,7 @@ from dynpush.kernels import locomotion as k
 from dynpush.sim.push_env import _articulation_mask
 
 from .env_state import ConstraintEpisodeStats, EnvBase
+from .config import ConfigError
 from .legged_scene import build_legged_scene, legged_view, locomotion_task
 from .locomotion_config import LocomotionEnvConfig
 
@@ -154,7 +155,7 @@ class LocomotionEnv(EnvBase, VecEnv):
         """Scales the random arm motions and base pushes (``randomization.arm_amplitude``, ``push_velocity``) by
         ``scale`` in [0, 1] from their next draw on; the training curriculum's (``schedules.disturbance_scale_at``)."""
         if not 0.0 <= scale <= 1.0:
-            raise ValueError(f"disturbance scale must lie in [0, 1], got {scale!r}")
+            raise ConfigError(f"disturbance scale must lie in [0, 1], got {scale!r}")
         self.params.disturbance_scale.fill_(scale)
 
     # ------------------------------------------------------------------ the step

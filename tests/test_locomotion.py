@@ -129,7 +129,7 @@ def test_locomotion_env_state_round_trip():
     assert env.constraints_t.shape == (4, loco.NUM_CONSTRAINTS)
     with pytest.raises(ValueError, match="same num_envs"):
         env.load_state_dict({**saved, "task.command": np.zeros((5, 6), np.float32)})
-    with pytest.raises(ValueError, match=r"disturbance scale must lie in \[0, 1\], got 1.5"):
+    with pytest.raises(ConfigError, match=r"disturbance scale must lie in \[0, 1\], got 1.5"):
         env.set_disturbance_scale(1.5)
 
 

@@ -12,6 +12,8 @@
   violated (value > 0), averaged over episodes.
 - time to success (the first step with the success flag, successful episodes only) and the breakdown
   by object shape.
+- ``while_touching``: the end-effector's vertical speed and the object's horizontal acceleration while
+  they touch (:class:`ContactMotionObserver`), which tell a smooth push from a shaking one.
 
 The environment is the one the policy was trained in: its config comes from the ``training_config``
 of the policy's ONNX metadata, changed only by ``--num-envs``, ``--noise/--no-noise`` and ``--set
@@ -270,6 +272,38 @@ class ContactHeightObserver:
                 self.heights[w].append(float(z[w]))
 
 
+class ContactMotionObserver:
+    """While the end-effector touches the object: its vertical speed |v_z| [m/s] and the object's horizontal
+    acceleration |a_xy| [m/s^2] (world frame), by finite differences of the poses over the control step.
+
+    A sample needs the world's episode to have gone on through the two previous steps (three poses of one
+    episode). Only the first ``count`` worlds are recorded. On the legged robot the gait shakes the arm, and
+    the object takes the shocks: these figures show it (README, legged mode)."""
+
+    def __init__(self, env: PushEnv, control_dt: float, count: int):
+        self.env, self.dt, self.probe = env, control_dt, EnvProbe(env)
+        self.recorded = np.arange(env.num_envs) < count
+        self.steps_in_episode = np.zeros(env.num_envs, dtype=int)  # consecutive continuing steps
+        self.ee_z = self.object_xy = self.object_velocity = None
+        self.ee_vertical_speed: list[np.ndarray] = []
+        self.object_acceleration: list[np.ndarray] = []
+
+    def observe(self, step: int, in_episode: torch.Tensor, continuing: torch.Tensor) -> None:
+        going_on = continuing.cpu().numpy()
+        self.steps_in_episode = np.where(going_on, self.steps_in_episode + 1, 0)
+        ee_z, object_xy = self.probe.ee_position()[:, 2], self.probe.object()[:, :2]
+        if self.ee_z is not None:
+            object_velocity = (object_xy - self.object_xy) / self.dt
+            if self.object_velocity is not None:
+                touching = self.env.critic_obs_t[:, EE_CONTACT_COLUMN].cpu().numpy() > 0.5
+                sampled = self.recorded & touching & (self.steps_in_episode >= 3)
+                self.ee_vertical_speed.append(np.abs(ee_z - self.ee_z)[sampled] / self.dt)
+                acceleration = np.linalg.norm(object_velocity - self.object_velocity, axis=1) / self.dt
+                self.object_acceleration.append(acceleration[sampled])
+            self.object_velocity = object_velocity
+        self.ee_z, self.object_xy = ee_z, object_xy
+
+
 def _percent(mask: np.ndarray) -> float | None:
     """Percentage of True entries; None (JSON null) for no entries."""
     return 100.0 * float(mask.mean()) if mask.size else None
@@ -315,13 +349,14 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
     env_cfg = env_config_for(policy, cfg.worlds, cfg.noise, cfg.device, cfg.seed, cfg.overrides)
     env = make_push_env(env_cfg)
     rounds = math.ceil(cfg.episodes / cfg.worlds)
-    parts, violated = [], []
+    parts, violated, motions = [], [], []
     start = time.perf_counter()
     world_steps = rounds * cfg.worlds * env.max_episode_length
     with tqdm(total=world_steps, desc="eval", unit="world-step", unit_scale=True) as bar:
-        for _ in range(rounds):
+        for k in range(rounds):
             constraints = ConstraintObserver(env)
-            parts.append(run_first_episodes(env, policy, [constraints], bar))
+            motions.append(ContactMotionObserver(env, env_cfg.control_dt, cfg.episodes - k * cfg.worlds))
+            parts.append(run_first_episodes(env, policy, [constraints, motions[-1]], bar))
             violated.append(constraints.violated.cpu().numpy())
     elapsed = time.perf_counter() - start
     episodes = FirstEpisodes.concatenate(parts, cfg.episodes)
@@ -346,6 +381,11 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
         "constraint_violation_percent": {name: float(v) for (name, _), v in zip(CONSTRAINT_GROUPS, violation)},
         "time_to_success_s": _stats(time_to_success),
         "episode_length_s": _stats(episodes.length * dt),
+        "while_touching": {
+            "ee_vertical_speed_m_s": _stats(np.concatenate([x for m in motions for x in m.ee_vertical_speed] or [[]])),
+            "object_horizontal_acceleration_m_s2": _stats(
+                np.concatenate([x for m in motions for x in m.object_acceleration] or [[]])),
+        },
         "by_shape": by_shape,
         "paper": {"table_I_row": paper_name, "success_rate": paper_success, "toppled_rate": paper_toppled,
                   "constraint_violation_percent": PAPER_TABLE_II},

@@ -8,7 +8,8 @@ import torch
 import yaml
 
 from dynpush.cli import main
-from dynpush.policies.evaluate import EvalConfig, FootprintConfig, evaluate, footprint_study, paper_table_i_row
+from dynpush.policies.evaluate import (EE_CONTACT_COLUMN, ContactMotionObserver, EvalConfig, FootprintConfig, evaluate,
+                                       footprint_study, paper_table_i_row)
 from dynpush.policies.export import build_actor, export_policy
 from dynpush.policies.scenarios import (FACE_NAMES, NO_FACE, contact_face, count_face_switches, load_scenario,
                                         parse_scenario, run_scenario)
@@ -47,8 +48,40 @@ def test_eval_writes_tables_json_and_png(policy, tmp_path):
     assert saved["paper"]["table_I_row"] == "Ours (with all the above)"
     assert all(0.0 <= v <= 100.0 for v in saved["constraint_violation_percent"].values())
     assert saved["episode_length_s"]["max"] <= 0.4 + 1e-9
+    assert set(saved["while_touching"]) == {"ee_vertical_speed_m_s", "object_horizontal_acceleration_m_s2"}
     assert saved["config"]["env"]["randomize_first_episode_length"] is False
     assert is_png(tmp_path / "eval.png")
+
+
+def test_contact_motion_of_hand_made_trajectories(small_env):
+    """Object at constant acceleration (3, 4) m/s^2, end-effector rising at 0.2 m/s. World 0 touches
+    throughout, world 1 touches but its episode restarts after step 2, world 2 never touches, world 3 is
+    beyond the recorded count."""
+    dt, steps = 0.02, 8
+    observer = ContactMotionObserver(small_env, dt, count=3)
+
+    class Probe:
+        t = 0
+
+        def object(self):
+            xy = 0.5 * np.array([3.0, 4.0]) * (self.t * dt) ** 2 + np.array([0.1, -0.2])
+            return np.tile(np.concatenate([xy, [0.3, 0, 0, 0, 1]]), (4, 1))
+
+        def ee_position(self):
+            return np.tile([0.0, 0.0, 0.1 + 0.2 * self.t * dt], (4, 1))
+
+    contact = torch.zeros(4, small_env.critic_obs_t.shape[1])
+    contact[[0, 1, 3], EE_CONTACT_COLUMN] = 1.0
+    observer.env, observer.probe = type("Env", (), {"critic_obs_t": contact})(), Probe()
+    for step in range(steps):
+        observer.probe.t = step + 1  # the state after the step
+        continuing = torch.tensor([True, step != 2, True, True])
+        observer.observe(step, torch.ones(4, dtype=torch.bool), continuing)
+    speeds, accelerations = np.concatenate(observer.ee_vertical_speed), np.concatenate(observer.object_acceleration)
+    # World 0 from step 2 on (3 poses of its episode), world 1 from step 5 on (three steps after its restart).
+    assert len(speeds) == len(accelerations) == (steps - 2) + (steps - 5)
+    np.testing.assert_allclose(speeds, 0.2, rtol=1e-6)
+    np.testing.assert_allclose(accelerations, 5.0, rtol=1e-6)
 
 
 def test_eval_counts_only_each_worlds_first_episode(policy, tmp_path):

@@ -22,7 +22,9 @@ Constraints (CaT, violated where > 0), columns in ``CONSTRAINT_GROUPS`` order: l
 ``|tau| - tau_nominal`` (12), leg joint velocity ``|qd| - qd_max`` (12), leg joint acceleration
 ``|qd_t - qd_{t-1}| / dt - qdd_max`` (12), leg action rate ``|a_t - a_{t-1}| / dt - rate_max`` (12),
 collision (5: the base box and each leg's knee and shank within ``collision_margin`` of the ground,
-the ground being the plane z = 0), foot air time ``t_min - t_air`` at each touchdown (4).
+the ground being the plane z = 0), foot air time ``t_min - t_air`` at each touchdown (4), foot contact
+force ``|F_foot| - F_max`` (4: the ground's contact force on each lower leg, foot sphere and shank, at the
+control step's last substep, measured by the solver; ``gather_foot_forces``).
 
 Frames: ``_w`` world, ``_b`` base, ``_h`` heading frame (base yaw only). Legs LF, RF, LH, RH; joints HAA,
 HFE, KFE per leg (``dynpush.assets_usd.LEG_JOINT_NAMES``).
@@ -53,6 +55,7 @@ CONSTRAINT_GROUPS = (
     ("leg_action_rate", NUM_LEG_JOINTS),
     ("collision", 1 + NUM_FEET),
     ("foot_air_time", NUM_FEET),
+    ("foot_contact_force", NUM_FEET),
 )
 NUM_CONSTRAINTS = sum(size for _, size in CONSTRAINT_GROUPS)
 REWARD_TERMS = ("linear_velocity", "yaw_rate", "attitude", "height", "feet_air_time")
@@ -137,6 +140,7 @@ class LeggedLimits:
     acceleration_limit: float  # [rad/s^2]
     action_rate_limit: float  # [1/s] of raw action units
     air_time_min: float  # [s]
+    foot_force_limit: float  # [N]
     control_dt: float  # [s]
     foot_offset: wp.vec3  # foot sphere centre in the shank frame [m]
     foot_radius: float  # [m]
@@ -405,10 +409,19 @@ def clearance(x: wp.transform, point: wp.vec3, radius: float):
 
 
 @wp.kernel
+def gather_foot_forces(total_force: wp.array(dtype=wp.vec3), foot_force: wp.array2d(dtype=float)):
+    """``foot_force[w, f]`` = |F| [N] of contact sensor row ``NUM_FEET w + f`` (the lower leg ``f`` of world ``w``)."""
+    w = wp.tid()
+    for f in range(NUM_FEET):
+        foot_force[w, f] = wp.length(total_force[w * NUM_FEET + f])
+
+
+@wp.kernel
 def compute_constraints(
     view: LeggedView,
     task: LocomotionTask,
     limits: LeggedLimits,
+    foot_force: wp.array2d(dtype=float),
     constraints: wp.array2d(dtype=float),
 ):
     """Constraint values (see the module docstring); then stores this step's leg velocities for the next."""
@@ -444,6 +457,9 @@ def compute_constraints(
     for f in range(NUM_FEET):
         air = task.touchdown_air_time[w, f]
         constraints[w, k + f] = wp.where(air >= 0.0, limits.air_time_min - air, 0.0)
+    k += NUM_FEET
+    for f in range(NUM_FEET):
+        constraints[w, k + f] = foot_force[w, f] - limits.foot_force_limit
 
 
 @wp.kernel

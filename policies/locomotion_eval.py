@@ -30,7 +30,7 @@ from .train import apply_overrides
 UNITS = ("m/s", "m/s", "rad/s", "rad", "rad", "m")
 # Units of the constraint values (value - limit) of each group of CONSTRAINT_GROUPS.
 CONSTRAINT_UNITS = {"leg_joint_torque": "N m", "leg_joint_velocity": "rad/s", "leg_joint_acceleration": "rad/s^2",
-                    "leg_action_rate": "1/s", "collision": "m", "foot_air_time": "s"}
+                    "leg_action_rate": "1/s", "collision": "m", "foot_air_time": "s", "foot_contact_force": "N"}
 EXCESS_PERCENTILES = (50, 90, 99)
 
 

@@ -85,6 +85,8 @@ class LocomotionTrainConfig:
         # Runs from before the ramp existed had their full disturbances from the first iteration, and one arm
         # amplitude for every joint.
         data = {"disturbance_ramp": (0, 0), **data}
+        if "p_max" in data:  # runs from before the foot contact force constraint did not terminate on it
+            data["p_max"] = {**_no_terminations(), **data["p_max"]}
         randomization = data.get("env", {}).get("randomization", {})
         if isinstance(randomization.get("arm_amplitude"), (int, float)):  # new dicts: the caller's stays as it is
             amplitude = (float(randomization["arm_amplitude"]),) * 5

@@ -108,6 +108,9 @@ class LocomotionConstraintConfig:
     acceleration_limit: float = 800.0  # [rad/s^2] CaT: 800
     action_rate_limit: float = 40.0  # [1/s] ours: 0.8 action units (0.4 rad of target) per 20 ms step
     air_time_min: float = 0.25  # [s] CaT's foot air time (style) constraint
+    # [N] ground contact force on one lower leg; ours: the robot's weight (56.7 kg with the arm), so a foot that
+    # alone carries more than the whole robot stamps
+    foot_force_limit: float = 556.0
     collision_margin: float = 0.01  # [m] ours: closer to the ground counts as touching it
     contact_margin: float = 0.01  # [m] ours: a foot this close to the ground is in contact
 
@@ -116,7 +119,7 @@ class LocomotionConstraintConfig:
             raise ConfigError(f"{prefix}.leg_nominal_torque must be 3 positive numbers (HAA, HFE, KFE) [N m]")
         if not 0.0 < self.velocity_fraction <= 1.0:
             raise ConfigError(f"{prefix}.velocity_fraction must lie in (0, 1], got {self.velocity_fraction!r}")
-        for name in ("acceleration_limit", "action_rate_limit", "air_time_min"):
+        for name in ("acceleration_limit", "action_rate_limit", "air_time_min", "foot_force_limit"):
             _check_positive(f"{prefix}.{name}", getattr(self, name))
         for name in ("collision_margin", "contact_margin"):
             _check_positive(f"{prefix}.{name}", getattr(self, name), allow_zero=True)

@@ -13,6 +13,7 @@ import newton
 import numpy as np
 import torch
 import warp as wp
+from newton.sensors import SensorContact
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
@@ -56,6 +57,14 @@ class LocomotionEnv(EnvBase, VecEnv):
 
             self.solver.mjw_model.opt.warn_overflow &= ~(mujoco_warp.OverflowType.ITERATIONS | mujoco_warp.OverflowType.LS_ITERATIONS)
             self.state_0, self.state_1 = model.state(), model.state()
+            # Ground contact force on each lower leg (foot sphere and shank), from MuJoCo's constraint forces
+            # of the control step's last substep, for the foot contact force constraint.
+            self.contacts = newton.CollisionPipeline(model, rigid_contact_max=self.solver.get_max_contact_count(),
+                                                     soft_contact_max=0).contacts()
+            self.foot_sensor = SensorContact(model, sensing_bodies=[int(b) for b in self.scene.shank_body.reshape(-1)],
+                                             request_contact_attributes=False)
+            self.solver_observables = self.solver.observables(contacts=self.contacts,
+                                                              kinds=self.foot_sensor.solver_observable_kinds)
             self.control = model.control()
             self._make_buffers()
             self._make_params()
@@ -79,6 +88,7 @@ class LocomotionEnv(EnvBase, VecEnv):
         self.reward_terms = wp.zeros((n, len(REWARD_TERMS)), dtype=float)
         self.tracking_error = wp.zeros((n, k.NUM_COMMANDS), dtype=float)
         self.constraints = wp.zeros((n, k.NUM_CONSTRAINTS), dtype=float)
+        self.foot_force = wp.zeros((n, k.NUM_FEET), dtype=float)  # [N]
         self.reset_flags = wp.zeros(n, dtype=int)
         self.time_out = wp.zeros(n, dtype=int)
         self.articulation_mask = wp.zeros(self.scene.model.articulation_count, dtype=bool)
@@ -123,6 +133,7 @@ class LocomotionEnv(EnvBase, VecEnv):
         lim.acceleration_limit = c.acceleration_limit
         lim.action_rate_limit = c.action_rate_limit
         lim.air_time_min = c.air_time_min
+        lim.foot_force_limit = c.foot_force_limit
         lim.control_dt = cfg.control_dt
         lim.foot_offset = wp.vec3(*robot.foot_offset)
         lim.foot_radius = robot.foot_radius
@@ -169,14 +180,18 @@ class LocomotionEnv(EnvBase, VecEnv):
         dt = cfg.control_dt / cfg.substeps
         for sub in range(cfg.substeps):
             state_in, state_out = (self.state_0, self.state_1) if sub % 2 == 0 else (self.state_1, self.state_0)
-            self.solver.step(state_in, state_out, self.control, None, dt)
+            last = sub == cfg.substeps - 1
+            self.solver.step(state_in, state_out, self.control, self.contacts if last else None, dt,
+                             observables=self.solver_observables if last else None)
         if cfg.substeps % 2:  # the view reads state_0
             for name in ("body_q", "body_qd", "joint_q", "joint_qd"):
                 getattr(self.state_0, name).assign(getattr(self.state_1, name))
         self._launch(k.update_feet, [self.view, self.limits, self.task])
         self._launch(k.compute_rewards, [self.view, self.task, self.reward_params, self.reward, self.reward_terms,
                                          self.tracking_error])
-        self._launch(k.compute_constraints, [self.view, self.task, self.limits, self.constraints])
+        self.foot_sensor.update(None, self.contacts, observables=self.solver_observables)
+        self._launch(k.gather_foot_forces, [self.foot_sensor.total_force, self.foot_force])
+        self._launch(k.compute_constraints, [self.view, self.task, self.limits, self.foot_force, self.constraints])
         self._launch(k.compute_terminations, [self.view, self.task, self.limits, self.reset_flags, self.time_out])
         self._start_flagged()
         self._launch(k.apply_events, [cfg.seed, self.params, self.view, self.task])

@@ -232,3 +232,22 @@ def test_eval_of_a_locomotion_onnx_writes_tracking_errors_under_the_requested_di
     assert (tmp_path / "locomotion_eval.png").read_bytes()[:4] == b"\x89PNG"
     assert main(["eval", str(path), "--out", str(tmp_path), "--set", "ppo.learning_rate=0.1"]) == 2
     assert "a locomotion evaluation takes env.* overrides only, got 'ppo.learning_rate=0.1'" in capsys.readouterr().err
+
+
+def test_foot_contact_forces_carry_the_standing_robot():
+    """The foot contact force constraint reads the solver's contact forces: standing still (no arm motions or
+    pushes), the vertical forces on the four lower legs together carry the robot's weight, its randomised base
+    mass included; the constraint takes each leg's whole force, friction included."""
+    env = LocomotionEnv(LocomotionEnvConfig(num_envs=4, seed=2))
+    env.set_disturbance_scale(0.0)
+    vertical = []
+    for step in range(100):
+        env.step(torch.zeros(4, 12))
+        force = env.foot_sensor.total_force.numpy().reshape(4, 4, 3)  # (world, leg, xyz) [N]
+        vertical.append(force[..., 2].sum(axis=1))
+    model = env.scene.model
+    world_mass = np.bincount(model.body_world.numpy(), weights=model.body_mass.numpy(), minlength=4)[:4]
+    np.testing.assert_allclose(np.mean(vertical[-40:], axis=0), 9.81 * world_mass, rtol=0.02)
+    np.testing.assert_allclose(env.foot_force.numpy(), np.linalg.norm(force, axis=2), rtol=1e-5)
+    limit = env.cfg.constraints.foot_force_limit
+    np.testing.assert_allclose(env.constraints_t[:, -4:].numpy(), env.foot_force.numpy() - limit, rtol=1e-6)

@@ -108,7 +108,7 @@ def limits_struct(**values):
 
 
 def test_layout_constants():
-    assert (k.NUM_POLICY_OBS, k.NUM_CRITIC_OBS, k.NUM_CONSTRAINTS) == (61, 67, 57)
+    assert (k.NUM_POLICY_OBS, k.NUM_CRITIC_OBS, k.NUM_CONSTRAINTS) == (61, 67, 61)
 
 
 # --------------------------------------------------------------------------- actions
@@ -214,13 +214,14 @@ def test_compute_constraints():
     view_np, task_np = as_f32(view_np), as_f32(task_np)
     lim = dict(stiffness=rng.uniform(20, 80, 12), damping=rng.uniform(0.5, 2, 12), effort_limit=rng.uniform(40, 80, 12),
                nominal_torque=rng.uniform(10, 40, 12), velocity_limit=rng.uniform(2, 6, 12),
-               acceleration_limit=200.0, action_rate_limit=60.0, air_time_min=0.25, knee_radius=0.06,
+               acceleration_limit=200.0, action_rate_limit=60.0, air_time_min=0.25, foot_force_limit=300.0, knee_radius=0.06,
                shank_end=(0.01, 0.02, -0.25), shank_radius=0.03, base_half_extents=(0.35, 0.15, 0.1), collision_margin=0.03)
     limits = limits_struct(**lim)
     lim = as_f32({n: np.asarray(v) for n, v in lim.items()})
     view, task = structs(view_np, task_np)
     out = wp.zeros((n, k.NUM_CONSTRAINTS), dtype=float, device=DEVICE)
-    launch(k.compute_constraints, n, view, task, limits, out)
+    foot_force = f32(rng.uniform(0.0, 600.0, (n, 4)))
+    launch(k.compute_constraints, n, view, task, limits, arr(foot_force), out)
 
     q, qd = view_np["joint_q"][view_np["leg_q"]], view_np["joint_qd"][view_np["leg_qd"]]
     tau_pd = lim["stiffness"] * (task_np["leg_target"] - q) - lim["damping"] * qd
@@ -238,6 +239,7 @@ def test_compute_constraints():
         "leg_action_rate": np.abs(task_np["actions"] - task_np["last_actions"]) / DT - 60.0,
         "collision": 0.03 - np.column_stack([corners[..., 2].min(1), np.minimum(knee, end)]),
         "foot_air_time": np.where(touchdown >= 0, 0.25 - touchdown, 0.0),
+        "foot_contact_force": foot_force - 300.0,
     }
     assert [(name, g.shape[1]) for name, g in groups.items()] == list(k.CONSTRAINT_GROUPS)
     assert (tau_pd > lim["effort_limit"]).any() and (tau_pd < -lim["effort_limit"]).any(), "both clip sides"
@@ -247,8 +249,18 @@ def test_compute_constraints():
         assert (g > 0).any() and (g < 0).any(), f"random states should both violate and satisfy {name}"
         close(actual[:, start: start + g.shape[1]], g, rtol=1e-4, atol=1e-4, err_msg=name)
         start += g.shape[1]
-    np.testing.assert_array_equal(actual[:, -4][touchdown[:, 0] < 0], 0.0)
+    np.testing.assert_array_equal(actual[:, -8][touchdown[:, 0] < 0], 0.0)
     close(task.leg_velocity_last.numpy(), qd, atol=0, err_msg="leg_velocity_last <- this step's qd")
+
+
+def test_gather_foot_forces():
+    """Sensor row 4 w + f (world w, lower leg f) -> |F| [N] at foot_force[w, f]."""
+    rng = np.random.default_rng(7)
+    n = 64
+    total = f32(rng.normal(0.0, 150.0, (n * 4, 3)))
+    out = wp.zeros((n, 4), dtype=float, device=DEVICE)
+    launch(k.gather_foot_forces, n, wp.array(total, dtype=wp.vec3, device=DEVICE), out)
+    close(out.numpy(), np.linalg.norm(total, axis=1).reshape(n, 4), rtol=1e-5)
 
 
 # --------------------------------------------------------------------------- terminations

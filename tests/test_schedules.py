@@ -114,7 +114,10 @@ def test_disturbance_ramp_in_the_locomotion_config():
     old_run = cfg.to_dict()
     del old_run["disturbance_ramp"]
     old_run["env"]["randomization"]["arm_amplitude"] = 0.8
+    del old_run["p_max"]["foot_contact_force"]
     old = LocomotionTrainConfig.from_dict(old_run)
+    assert old.p_max["foot_contact_force"] == (0.0, 0.0) and "foot_contact_force" not in old_run["p_max"], \
+        "runs from before the foot contact force constraint never terminated on it"
     assert old_run["env"]["randomization"]["arm_amplitude"] == 0.8, "the saved config it read is left unchanged"
     assert old.disturbance_ramp == (0, 0), "runs from before the ramp had it off"
     assert old.env.randomization.arm_amplitude == (0.8,) * 5, "and one arm amplitude for all joints"

@@ -15,8 +15,8 @@ in that order, scale 1): ``base_linear_velocity_b`` (3), ``base_angular_velocity
 (1), ``foot_contact`` (4) and ``base_mass_offset`` (1).
 
 Rewards (``REWARD_TERMS``): ``w exp(-e^2 / sigma)`` for the heading-frame velocity, the yaw rate, the attitude
-and the height, and legged_gym's stepping reward ``w sum_feet (t_air - t_target)`` at touchdowns while the
-command asks to move (``compute_rewards``).
+and the height, legged_gym's stepping reward ``w sum_feet (t_air - t_target)`` at touchdowns while the
+command asks to move, and legged_gym's action-rate penalty ``-w sum_j (a_t - a_{t-1})^2`` (``compute_rewards``).
 
 Constraints (CaT, violated where > 0), columns in ``CONSTRAINT_GROUPS`` order: leg joint torque
 ``|tau| - tau_nominal`` (12), leg joint velocity ``|qd| - qd_max`` (12), leg joint acceleration
@@ -58,7 +58,7 @@ CONSTRAINT_GROUPS = (
     ("foot_contact_force", NUM_FEET),
 )
 NUM_CONSTRAINTS = sum(size for _, size in CONSTRAINT_GROUPS)
-REWARD_TERMS = ("linear_velocity", "yaw_rate", "attitude", "height", "feet_air_time")
+REWARD_TERMS = ("linear_velocity", "yaw_rate", "attitude", "height", "feet_air_time", "action_rate")
 vec12 = wp.types.vector(length=NUM_LEG_JOINTS, dtype=float)
 vec6 = wp.types.vector(length=NUM_COMMANDS, dtype=float)
 NUM_REWARD_TERMS = len(REWARD_TERMS)
@@ -165,7 +165,7 @@ class LocomotionRewardParams:
     sigma_height: float  # [m^2]
     air_time_target: float  # [s]
     moving_command: float  # the stepping reward counts while |(vx, vy)| + |yaw rate| exceeds this
-    weights: wp.array(dtype=float)  # (5,) REWARD_TERMS order
+    weights: wp.array(dtype=float)  # (6,) REWARD_TERMS order
 
 
 @wp.func
@@ -368,7 +368,8 @@ def compute_rewards(
     """Tracking rewards of the 6D command: ``w_i exp(-e_i^2 / sigma_i)`` for the heading-frame velocity
     (vx, vy), the yaw rate, the attitude (roll, pitch) and the base height; and the stepping reward of
     legged_gym, ``w_5 sum_feet (t_air - air_time_target)`` over the feet touching down this step, while the
-    command asks to move (a standing robot collects none). ``tracking_error`` (N, 6): the errors
+    command asks to move (a standing robot collects none); legged_gym's action-rate penalty
+    ``-w_6 sum_j (a_t,j - a_t-1,j)^2`` (raw action units). ``tracking_error`` (N, 6): the errors
     ``command - measured`` per component (vx, vy, yaw rate, roll, pitch, height)."""
     w = wp.tid()
     x_b = view.body_q[view.base_body[w]]
@@ -388,12 +389,17 @@ def compute_rewards(
         air = task.touchdown_air_time[w, f]
         if moving and air >= 0.0:
             stepping += air - params.air_time_target
+    action_change = float(0.0)
+    for j in range(NUM_LEG_JOINTS):
+        change = task.actions[w, j] - task.last_actions[w, j]
+        action_change += change * change
     terms = reward_vec(
         wp.exp(-wp.dot(e_v, e_v) / params.sigma_linear_velocity),
         wp.exp(-e_yaw * e_yaw / params.sigma_yaw_rate),
         wp.exp(-wp.dot(e_att, e_att) / params.sigma_attitude),
         wp.exp(-e_h * e_h / params.sigma_height),
         stepping,
+        -action_change,
     )
     total = float(0.0)
     for i in range(NUM_REWARD_TERMS):

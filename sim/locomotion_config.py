@@ -85,6 +85,8 @@ class LocomotionRewardConfig:
     feet_air_time_weight: float = 1.0  # legged_gym: 1.0
     air_time_target: float = 0.3  # [s] ours (legged_gym: 0.5): the runs that walked (loco4 on)
     moving_command: float = 0.1  # legged_gym: |(vx, vy)| > 0.1; ours adds |yaw rate|
+    # -sum_j (a_t - a_t-1)^2 over the leg actions; legged_gym: 0.01; ours off (CaT's action-rate constraint instead)
+    action_rate_weight: float = 0.0
 
     def validate(self, prefix: str = "rewards") -> None:
         for f in dataclasses.fields(self):
@@ -95,7 +97,7 @@ class LocomotionRewardConfig:
     def weights(self) -> tuple[float, ...]:
         """In ``REWARD_TERMS`` order."""
         return (self.linear_velocity_weight, self.yaw_rate_weight, self.attitude_weight, self.height_weight,
-                self.feet_air_time_weight)
+                self.feet_air_time_weight, self.action_rate_weight)
 
 
 @dataclass

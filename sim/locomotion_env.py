@@ -3,7 +3,8 @@
 Physics is MuJoCo-Warp through Newton (``SolverMuJoCo`` with MuJoCo's own contacts): XPBD's joint drives
 are not the PD law and its legged robot sinks (README, "Solver cross-check"). One control step (50 Hz)
 is one captured Warp graph: actions -> leg and arm joint targets, ``substeps`` solver steps, feet,
-rewards, constraints, terminations, auto-reset, scheduled events (commands, arm targets, pushes) and
+rewards, the ground's contact force on each lower leg (Newton's ``SensorContact`` on MuJoCo's contact forces
+of the last substep), constraints, terminations, auto-reset, scheduled events (commands, arm targets, pushes) and
 observations. Kernels and layouts: :mod:`dynpush.kernels.locomotion`.
 """
 
@@ -20,8 +21,8 @@ from tensordict import TensorDict
 from dynpush.kernels import locomotion as k
 from dynpush.sim.push_env import _articulation_mask
 
-from .env_state import ConstraintEpisodeStats, EnvBase
 from .config import ConfigError
+from .env_state import ConstraintEpisodeStats, EnvBase
 from .legged_scene import build_legged_scene, legged_view, locomotion_task
 from .locomotion_config import LocomotionEnvConfig
 

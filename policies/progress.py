@@ -22,7 +22,7 @@ GROUP_ABBREVIATIONS = {
     "base_command": "base", "arm_command": "arm", "arm_action_rate": "rate", "arm_joint_position": "q",
     "arm_joint_velocity": "qd", "arm_joint_torque": "tau", "leg_joint_torque": "leg", "collision": "coll",
     "object_balance": "bal", "leg_joint_velocity": "legqd", "leg_joint_acceleration": "legqdd",
-    "leg_action_rate": "legrate", "foot_air_time": "air",
+    "leg_action_rate": "legrate", "foot_air_time": "air", "foot_contact_force": "force",
 }
 # Reward terms on the progress line: the push task's task and reach, every locomotion tracking term.
 LINE_REWARDS = ("task", "reach", "linear_velocity", "yaw_rate", "attitude", "height", "feet_air_time")

@@ -66,7 +66,7 @@ def _imitate(args: argparse.Namespace) -> int:
 
     argv = args.argv[args.argv.index("imitate") + 1 :]
     cfg = apply_overrides(TrainConfig.preset_config(args.preset), args.set or [])
-    given = {"rounds": args.rounds, "steps_per_round": args.steps_per_round}
+    given = {"rounds": args.rounds, "steps_per_round": args.steps_per_round, "expert_object_size": args.expert_object_size}
     imitation = ImitationConfig(**{name: value for name, value in given.items() if value is not None})
     imitate(cfg, imitation, Path(args.runs) / args.name, resume=args.resume, command=shlex.join(["dynpush", "imitate", *argv]))
     return 0
@@ -106,6 +106,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true", help="continue after the last finished round")
     p.add_argument("--rounds", type=int, default=None, help="DAgger rounds (default 8)")
     p.add_argument("--steps-per-round", type=int, default=None, help="control steps of every world per round (default 250)")
+    p.add_argument("--expert-object-size", type=float, default=None, metavar="METRES",
+                   help="the expert assumes every object is a cuboid of this edge with a centred mass (it then acts only on"
+                        " what the policy observes); default: it reads the true size, shape and centre of mass; kept on --resume")
     p.add_argument("--set", nargs="*", metavar="FIELD=VALUE", help="override training config fields, as for train")
     p.set_defaults(func=_imitate)
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import torch
@@ -35,7 +35,7 @@ from tqdm import tqdm
 
 from dynpush.sim.config import ConfigError
 
-from .scripted import ScriptedPusher
+from .scripted import ScriptedPusher, ScriptedPusherConfig
 from .train import IMITATION_CHECKPOINT, TrainConfig, record_launch, sigterm_as_keyboard_interrupt
 
 
@@ -50,6 +50,9 @@ class ImitationConfig:
     batch_size: int = 4096
     learning_rate: float = 1.0e-3
     max_samples: int = 3_000_000  # newest labelled states kept
+    # m: None, the expert reads the object's true size, shape and centre of mass; a number, it assumes a cuboid
+    # of that edge (ScriptedPusherConfig.object_size) and acts on what the student observes too
+    expert_object_size: float | None = None
 
     def validate(self) -> ImitationConfig:
         for name in ("rounds", "steps_per_round", "epochs", "batch_size", "max_samples"):
@@ -60,6 +63,8 @@ class ImitationConfig:
             raise ConfigError(f"imitation.expert_share must lie in [0, 1], got {self.expert_share!r}")
         if not self.learning_rate > 0.0:
             raise ConfigError(f"imitation.learning_rate must be > 0, got {self.learning_rate!r}")
+        if self.expert_object_size is not None and not 0.0 < self.expert_object_size <= 2.0:
+            raise ConfigError(f"imitation.expert_object_size must be None or in (0, 2] m, got {self.expert_object_size!r}")
         return self
 
 
@@ -68,7 +73,7 @@ class Dagger:
 
     def __init__(self, env, actor: torch.nn.Module, cfg: ImitationConfig, action_noise_std: float, seed: int = 0):
         self.env, self.actor, self.cfg, self.action_noise_std = env, actor, cfg, action_noise_std
-        self.expert = ScriptedPusher(env)
+        self.expert = ScriptedPusher(env, ScriptedPusherConfig(object_size=cfg.expert_object_size))
         self.optimizer = torch.optim.Adam(actor.mlp.parameters(), lr=cfg.learning_rate)
         self.generator = torch.Generator().manual_seed(seed)
         self.observations = torch.zeros(0, env.policy_obs_t.shape[1])
@@ -143,6 +148,9 @@ def imitate(cfg: TrainConfig, imitation: ImitationConfig, run_dir: Path, resume:
         if not data_path.exists():
             raise FileNotFoundError(f"--resume: no {data_path}; start without --resume first")
         cfg = TrainConfig.from_dict(json.loads(config_path.read_text()))
+        # The data set was labelled by the run's expert: keep it (configs older than the field had the true sizes).
+        saved_imitation = json.loads((run_dir / "imitation_config.json").read_text())
+        imitation = replace(imitation, expert_object_size=saved_imitation.get("expert_object_size"))
     elif config_path.exists():
         raise FileExistsError(f"{run_dir} holds a run already; choose another --name or pass --resume")
     cfg.validate()

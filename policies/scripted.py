@@ -24,7 +24,9 @@ own 11 actions (6D base command and 5 arm joints about their defaults):
 
 The controller has no memory: its action is a function of the current state, so that a memoryless
 policy can imitate it. The object's dimensions, shape and centre of mass are read from the task
-(privileged inputs no policy observes).
+(privileged inputs no policy observes), unless ``object_size`` is set: the controller then assumes every
+object is a cuboid of that edge with its centre of mass at its centre, and acts only on what the policy
+observes too (object and end-effector poses, goal), so that a student can imitate it exactly.
 """
 
 from __future__ import annotations
@@ -69,6 +71,7 @@ class ScriptedPusherConfig:
     lateral_yaw_gain: float = 2.0  # rad/s of base yaw rate per m of end-effector offset across the push
     around_step: float = 0.6  # rad of arc the walk around the object aims ahead of the base
     behind_margin: float = 0.5  # m the base origin must be behind the object's rear face to walk straight to the push stance
+    object_size: float | None = None  # m: None reads the true size, shape and centre of mass; else a nominal cuboid edge
 
 
 class ScriptedPusher:
@@ -87,7 +90,10 @@ class ScriptedPusher:
     def _half_extent(self, direction: np.ndarray, object_yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Centre-to-surface distance of the object along ``direction`` (unit, world xy) and the half width
         of the face it meets, across ``direction`` [m]."""
-        dims, shape = self.env.task.object_dims.numpy(), self.env.task.object_shape.numpy()
+        if self.cfg.object_size is None:
+            dims, shape = self.env.task.object_dims.numpy(), self.env.task.object_shape.numpy()
+        else:
+            dims, shape = np.full((len(direction), 3), self.cfg.object_size), np.zeros(len(direction), dtype=int)
         c, s = np.cos(object_yaw), np.sin(object_yaw)
         local_x = np.abs(c * direction[:, 0] + s * direction[:, 1])
         local_y = np.abs(-s * direction[:, 0] + c * direction[:, 1])
@@ -98,7 +104,10 @@ class ScriptedPusher:
         return np.where(cylinder, 0.5 * dims[:, 0], depth), np.where(cylinder, 0.5 * dims[:, 0], width)
 
     def _com_across(self, side_dir: np.ndarray, object_yaw: np.ndarray) -> np.ndarray:
-        """Offset [m] of the object's centre of mass from its frame origin along ``side_dir`` (unit, world xy)."""
+        """Offset [m] of the object's centre of mass from its frame origin along ``side_dir`` (unit, world xy);
+        zero with a nominal ``object_size``."""
+        if self.cfg.object_size is not None:
+            return np.zeros(len(side_dir))
         com_o = self.env.task.object_com_o.numpy()[:, :2]
         c, s = np.cos(object_yaw), np.sin(object_yaw)
         com_w = np.stack([c * com_o[:, 0] - s * com_o[:, 1], s * com_o[:, 0] + c * com_o[:, 1]], axis=1)

@@ -1,6 +1,7 @@
 """dynpush imitate (DAgger from the scripted pusher) and the critic warm-up of the CaT-PPO fine-tuning that follows."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -73,7 +74,7 @@ def observations_dict(observations: np.ndarray):
 
 def test_interrupted_imitation_resumes_after_its_last_round(tmp_path):
     run = tmp_path / "bc"
-    imitate(tiny(), tiny_imitation(1), run)
+    imitate(tiny(), replace(tiny_imitation(1), expert_object_size=0.4), run)
     with pytest.raises(FileExistsError, match="holds a run already"):
         imitate(tiny(), tiny_imitation(2), run)
     imitate(tiny(), tiny_imitation(2), run, resume=True)
@@ -82,6 +83,8 @@ def test_interrupted_imitation_resumes_after_its_last_round(tmp_path):
     assert rounds[1]["samples"] == 2 * 8 * 40  # the aggregated data set survived the restart
     launches = [json.loads(line) for line in (run / "launches.jsonl").read_text().splitlines()]
     assert [launch["resume"] for launch in launches] == [False, True]
+    # The resumed rounds are labelled by the run's own expert, not by the default one of the resuming call.
+    assert json.loads((run / "imitation_config.json").read_text())["expert_object_size"] == 0.4
 
 
 def test_imitation_config_errors_name_the_field():
@@ -89,6 +92,8 @@ def test_imitation_config_errors_name_the_field():
         ImitationConfig(rounds=0).validate()
     with pytest.raises(ConfigError, match=r"imitation.expert_share must lie in \[0, 1\]"):
         ImitationConfig(expert_share=1.5).validate()
+    with pytest.raises(ConfigError, match=r"imitation.expert_object_size must be None or in \(0, 2\] m"):
+        ImitationConfig(expert_object_size=0.0).validate()
     with pytest.raises(ConfigError, match="critic_warmup_iterations must be an integer >= 0"):
         tiny(warmup=-1).validate()
 

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from dynpush.policies.evaluate import yaw_of
-from dynpush.policies.scripted import ScriptedPusher, wrap
+from dynpush.policies.scripted import ScriptedPusher, ScriptedPusherConfig, wrap
 from dynpush.sim.episode import EpisodeSpec
 
 
@@ -51,6 +51,30 @@ def test_half_extent_matches_ray_box_exit(small_env):
             expected = box_ray_exit(dims[w, :2].astype(np.float64), yaw[w], direction[w])
             np.testing.assert_allclose((depth[w], half_width[w]), expected, rtol=1e-5)
         np.testing.assert_allclose((depth[3], half_width[3]), (0.5 * dims[3, 0], 0.5 * dims[3, 0]), rtol=1e-6)
+
+
+def test_nominal_object_size_acts_on_observable_state_only(small_env):
+    """With ``object_size`` set, the actions ignore the true size, shape and centre of mass (which the
+    privileged pusher's do not), and the geometry is that of a cuboid of that edge."""
+    env, rng = small_env, np.random.default_rng(6)
+    env.reset(randomize_episode_step=False)
+    nominal, privileged = ScriptedPusher(env, ScriptedPusherConfig(object_size=0.4)), ScriptedPusher(env)
+    saved = [a.numpy().copy() for a in (env.task.object_dims, env.task.object_shape, env.task.object_com_o)]
+    before_nominal, before_privileged = nominal(None), privileged(None)
+    try:
+        env.task.object_dims.assign(np.column_stack([rng.uniform(0.25, 0.75, (4, 2)), rng.uniform(0.4, 1.0, 4)]).astype(np.float32))
+        env.task.object_shape.assign(np.array([1, 0, 1, 0], dtype=np.int32))
+        env.task.object_com_o.assign(rng.uniform(-0.1, 0.1, (4, 3)).astype(np.float32))
+        np.testing.assert_array_equal(nominal(None), before_nominal)
+        assert not np.array_equal(privileged(None), before_privileged)
+        yaw, angle = rng.uniform(-math.pi, math.pi, 4), rng.uniform(-math.pi, math.pi, 4)
+        direction = np.column_stack([np.cos(angle), np.sin(angle)])
+        depth, half_width = nominal._half_extent(direction, yaw)
+        expected = [box_ray_exit(np.array([0.4, 0.4]), y, d) for y, d in zip(yaw, direction)]
+        np.testing.assert_allclose(np.column_stack([depth, half_width]), expected, rtol=1e-6)
+    finally:
+        for array, values in zip((env.task.object_dims, env.task.object_shape, env.task.object_com_o), saved):
+            array.assign(values)
 
 
 @pytest.mark.parametrize("goal_yaw_deg", [0.0, 25.0])

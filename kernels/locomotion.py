@@ -16,7 +16,9 @@ in that order, scale 1): ``base_linear_velocity_b`` (3), ``base_angular_velocity
 
 Rewards (``REWARD_TERMS``): ``w exp(-e^2 / sigma)`` for the heading-frame velocity, the yaw rate, the attitude
 and the height, legged_gym's stepping reward ``w sum_feet (t_air - t_target)`` at touchdowns while the
-command asks to move, and legged_gym's action-rate penalty ``-w sum_j (a_t - a_{t-1})^2`` (``compute_rewards``).
+command asks to move, and legged_gym's penalties on the action rate ``-w sum_j (a_t - a_{t-1})^2``, the base's
+vertical velocity ``-w v_z^2`` and its roll and pitch rates ``-w (omega_x,b^2 + omega_y,b^2)``
+(``compute_rewards``).
 
 Constraints (CaT, violated where > 0), columns in ``CONSTRAINT_GROUPS`` order: leg joint torque
 ``|tau| - tau_nominal`` (12), leg joint velocity ``|qd| - qd_max`` (12), leg joint acceleration
@@ -58,7 +60,8 @@ CONSTRAINT_GROUPS = (
     ("foot_contact_force", NUM_FEET),
 )
 NUM_CONSTRAINTS = sum(size for _, size in CONSTRAINT_GROUPS)
-REWARD_TERMS = ("linear_velocity", "yaw_rate", "attitude", "height", "feet_air_time", "action_rate")
+REWARD_TERMS = ("linear_velocity", "yaw_rate", "attitude", "height", "feet_air_time", "action_rate",
+                "base_vertical_velocity", "base_roll_pitch_rate")
 vec12 = wp.types.vector(length=NUM_LEG_JOINTS, dtype=float)
 vec6 = wp.types.vector(length=NUM_COMMANDS, dtype=float)
 NUM_REWARD_TERMS = len(REWARD_TERMS)
@@ -165,7 +168,7 @@ class LocomotionRewardParams:
     sigma_height: float  # [m^2]
     air_time_target: float  # [s]
     moving_command: float  # the stepping reward counts while |(vx, vy)| + |yaw rate| exceeds this
-    weights: wp.array(dtype=float)  # (6,) REWARD_TERMS order
+    weights: wp.array(dtype=float)  # (NUM_REWARD_TERMS,) REWARD_TERMS order
 
 
 @wp.func
@@ -368,13 +371,18 @@ def compute_rewards(
     """Tracking rewards of the 6D command: ``w_i exp(-e_i^2 / sigma_i)`` for the heading-frame velocity
     (vx, vy), the yaw rate, the attitude (roll, pitch) and the base height; and the stepping reward of
     legged_gym, ``w_5 sum_feet (t_air - air_time_target)`` over the feet touching down this step, while the
-    command asks to move (a standing robot collects none); legged_gym's action-rate penalty
-    ``-w_6 sum_j (a_t,j - a_t-1,j)^2`` (raw action units). ``tracking_error`` (N, 6): the errors
+    command asks to move (a standing robot collects none); legged_gym's penalties: action rate
+    ``-w_6 sum_j (a_t,j - a_t-1,j)^2`` (raw action units), the base's vertical velocity ``-w_7 v_z^2``
+    (world frame, of its centre of mass, m/s) and roll and pitch rates ``-w_8 (omega_x^2 + omega_y^2)``
+    (base frame, rad/s). ``tracking_error`` (N, 6): the errors
     ``command - measured`` per component (vx, vy, yaw rate, roll, pitch, height)."""
     w = wp.tid()
     x_b = view.body_q[view.base_body[w]]
     q_b = wp.transform_get_rotation(x_b)
-    velocity = heading_velocities(q_b, view.body_qd[view.base_body[w]])
+    qd_b = view.body_qd[view.base_body[w]]
+    velocity = heading_velocities(q_b, qd_b)
+    omega_b = wp.quat_rotate_inv(q_b, wp.spatial_bottom(qd_b))
+    vertical_velocity = wp.spatial_top(qd_b)[2]
     roll_pitch = heading_roll_pitch(q_b, yaw_quat(heading_yaw(q_b)))
     e_v = wp.vec2(task.command[w, 0] - velocity[0], task.command[w, 1] - velocity[1])
     e_yaw = task.command[w, 2] - velocity[2]
@@ -400,6 +408,8 @@ def compute_rewards(
         wp.exp(-e_h * e_h / params.sigma_height),
         stepping,
         -action_change,
+        -vertical_velocity * vertical_velocity,
+        -(omega_b[0] * omega_b[0] + omega_b[1] * omega_b[1]),
     )
     total = float(0.0)
     for i in range(NUM_REWARD_TERMS):

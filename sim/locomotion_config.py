@@ -87,6 +87,8 @@ class LocomotionRewardConfig:
     moving_command: float = 0.1  # legged_gym: |(vx, vy)| > 0.1; ours adds |yaw rate|
     # -sum_j (a_t - a_t-1)^2 over the leg actions; legged_gym: 0.01; ours off (CaT's action-rate constraint instead)
     action_rate_weight: float = 0.0
+    base_vertical_velocity_weight: float = 0.0  # -w v_z^2; legged_gym lin_vel_z: 2.0; ours off
+    base_roll_pitch_rate_weight: float = 0.0  # -w (omega_x^2 + omega_y^2); legged_gym ang_vel_xy: 0.05; ours off
 
     def validate(self, prefix: str = "rewards") -> None:
         for f in dataclasses.fields(self):
@@ -97,7 +99,8 @@ class LocomotionRewardConfig:
     def weights(self) -> tuple[float, ...]:
         """In ``REWARD_TERMS`` order."""
         return (self.linear_velocity_weight, self.yaw_rate_weight, self.attitude_weight, self.height_weight,
-                self.feet_air_time_weight, self.action_rate_weight)
+                self.feet_air_time_weight, self.action_rate_weight, self.base_vertical_velocity_weight,
+                self.base_roll_pitch_rate_weight)
 
 
 @dataclass

@@ -179,11 +179,11 @@ def test_compute_rewards():
     task_np["command"][: n // 4, :3] = 0.0  # standing commands collect no stepping reward
     air = rng.uniform(0.0, 1.0, (n, 4)).astype(np.float32)
     task_np["touchdown_air_time"] = np.where(rng.uniform(size=(n, 4)) < 0.3, air, -1.0).astype(np.float32)
-    prm = make_struct(k.LocomotionRewardParams, weights=rng.uniform(0.5, 2.0, 6))
+    prm = make_struct(k.LocomotionRewardParams, weights=rng.uniform(0.5, 2.0, k.NUM_REWARD_TERMS))
     prm.sigma_linear_velocity, prm.sigma_yaw_rate, prm.sigma_attitude, prm.sigma_height = sig
     prm.air_time_target, prm.moving_command = 0.5, 0.1
     view, task = structs(view_np, task_np)
-    reward, terms = wp.zeros(n, dtype=float, device=DEVICE), wp.zeros((n, 6), dtype=float, device=DEVICE)
+    reward, terms = wp.zeros(n, dtype=float, device=DEVICE), wp.zeros((n, k.NUM_REWARD_TERMS), dtype=float, device=DEVICE)
     error = wp.zeros((n, 6), dtype=float, device=DEVICE)
     launch(k.compute_rewards, n, view, task, prm, reward, terms, error)
 
@@ -196,10 +196,15 @@ def test_compute_rewards():
     stepping = np.where(moving, np.where(touchdown >= 0.0, touchdown - 0.5, 0.0).sum(1), 0.0)
     assert (~moving).sum() >= n // 4 and (stepping != 0).mean() > 0.5
     action_rate = -np.sum((task_np["actions"] - task_np["last_actions"]) ** 2, axis=1)
-    ref = np.column_stack([*(np.exp(-ei / s) for ei, s in zip(e, sig)), stepping, action_rate]) * prm.weights.numpy()
+    vertical_velocity = -qd_b[:, 2] ** 2
+    omega_b = np.einsum("nji,nj->ni", quat_matrix(x_b[:, 3:]), qd_b[:, 3:])  # R_b^T omega_w
+    roll_pitch_rate = -(omega_b[:, 0] ** 2 + omega_b[:, 1] ** 2)
+    ref = np.column_stack([*(np.exp(-ei / s) for ei, s in zip(e, sig)), stepping, action_rate, vertical_velocity,
+                           roll_pitch_rate]) * prm.weights.numpy()
     assert (ref.std(axis=0) > 0.1 * prm.weights.numpy()).all(), "every term should vary across the random states"
     close(terms.numpy(), ref, atol=2e-5, rtol=1e-5,
-          err_msg="w_i exp(-e_i^2 / sigma_i), w_5 sum(t_air - target) at touchdowns while moving, -w_6 sum(da^2)")
+          err_msg="w_i exp(-e_i^2 / sigma_i), w_5 sum(t_air - target) at touchdowns while moving, -w_6 sum(da^2),"
+                  " -w_7 v_z^2, -w_8 (omega_x,b^2 + omega_y,b^2)")
     close(reward.numpy(), ref.sum(1), atol=5e-5, rtol=1e-5)
     measured = np.column_stack([v_h[:, :2], qd_b[:, 5], roll, pitch, x_b[:, 2]])
     close(error.numpy(), u - measured, atol=2e-5, err_msg="tracking errors command - measured (vx, vy, yaw rate, roll, pitch, height)")

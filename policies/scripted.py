@@ -17,7 +17,8 @@ own 11 actions (6D base command and 5 arm joints about their defaults):
    contact is on the line of push through the object's centre of mass (read from the task: the
    randomised offset reaches a quarter of the object's size), shifted sideways by ``yaw_gain`` per
    radian of yaw error (within ``max_offset`` of the face). A push that misses the centre of mass
-   turns the object, so the yaw is steered toward the goal's while the object moves.
+   turns the object, so the yaw is steered toward the goal's while the object moves. An object that tilts
+   by more than ``tilt_limit`` is released (the base backs off at ``back_off_speed``) until it settles.
 3. **Turn**: within ``turn_radius`` of the goal with the yaw still off, push along the robot's heading
    at the largest offset, slowly, which turns the object more than it moves it.
 4. **Release**: at the goal (position and yaw within ``0.6`` of the success tolerances) back away.
@@ -71,6 +72,8 @@ class ScriptedPusherConfig:
     lateral_yaw_gain: float = 2.0  # rad/s of base yaw rate per m of end-effector offset across the push
     around_step: float = 0.6  # rad of arc the walk around the object aims ahead of the base
     behind_margin: float = 0.5  # m the base origin must be behind the object's rear face to walk straight to the push stance
+    tilt_limit: float = 0.1  # rad of object tilt (its z axis from the world's) above which a push backs off
+    back_off_speed: float = 0.3  # m/s
     object_size: float | None = None  # m: None reads the true size, shape and centre of mass; else a nominal cuboid edge
 
 
@@ -116,6 +119,7 @@ class ScriptedPusher:
     def __call__(self, observations: np.ndarray) -> np.ndarray:
         """Actions of every world from the true state (``observations`` unused: a policy's call signature)."""
         from dynpush.policies.evaluate import yaw_of
+        from dynpush.runtime.frames import tilt_angle
 
         cfg = self.cfg
         base, obj = self.probe.base(), self.probe.object()
@@ -149,6 +153,8 @@ class ScriptedPusher:
                    & (ee_along > -cfg.engage_distance) & (ee_along < cfg.slip_margin) & (base_along < -depth - 0.2))
         speed = np.where(turning, cfg.turn_speed, np.minimum(cfg.push_speed, cfg.turn_speed + distance))  # slow near the goal
         push_velocity = push_dir * speed[:, None] - side_dir * (cfg.lateral_gain * ee_lateral)[:, None]
+        tilted = tilt_angle(obj[:, 3:]) > cfg.tilt_limit
+        push_velocity = np.where(tilted[:, None], -cfg.back_off_speed * push_dir, push_velocity)
         # Otherwise walk to the stance behind the contact, around the object if the base is not behind it.
         stand = contact - push_dir * cfg.ee_ahead
         behind = stand - 0.3 * push_dir

@@ -56,10 +56,11 @@ def yaw_quat(yaw: float) -> np.ndarray:
     return np.array([0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)])
 
 
-def tilt_angle(q: ArrayLike) -> float:
-    """Angle [rad] between the body's z axis and world z for a quaternion (x, y, z, w)."""
-    x, y, z, w = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
-    return math.acos(min(1.0, max(-1.0, 1.0 - 2.0 * (x * x + y * y))))
+def tilt_angle(q: ArrayLike) -> float | np.ndarray:
+    """Angle [rad] between the body's z axis and world z for quaternions (..., 4) (x, y, z, w)."""
+    q = np.asarray(q, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return np.arccos(np.clip(1.0 - 2.0 * (q[..., 0] ** 2 + q[..., 1] ** 2), -1.0, 1.0))
 
 
 def rotation_angle(q_a: ArrayLike, q_b: ArrayLike) -> float:

@@ -9,6 +9,7 @@ import torch
 from dynpush.policies.evaluate import yaw_of
 from dynpush.policies.scripted import ScriptedPusher, ScriptedPusherConfig, wrap
 from dynpush.sim.episode import EpisodeSpec
+from warp_numpy_helpers import quat_mul
 
 
 def box_ray_exit(dims_xy: np.ndarray, yaw: float, direction: np.ndarray) -> tuple[float, float]:
@@ -97,6 +98,34 @@ def test_pushes_a_cuboid_to_its_goal(small_env, goal_yaw_deg):
             best_yaw_error = min(best_yaw_error, abs(float(wrap(goal[2] - yaw_of(obj[3:])))))
     assert best_distance < 0.1
     assert best_yaw_error < math.radians(10.0)
+
+
+def test_backs_off_an_object_that_tilts(small_env, monkeypatch):
+    """While pushing, an object tilted past ``tilt_limit`` makes the base back off along the push; a smaller
+    tilt leaves the push command as it is."""
+    env = small_env
+    env.set_episodes({w: EpisodeSpec(dims=(0.5, 0.4, 0.6), mass=4.0, friction=0.6, goal=(1.2, 0.0, 0.0),
+                                     base=(-1.8, 0.0, 0.0)) for w in range(env.num_envs)})
+    pusher = ScriptedPusher(env)
+    for _ in range(150):
+        env.step(torch.from_numpy(pusher(None)))
+
+    true_object = pusher.probe.object
+
+    def base_vx(tilt: float) -> np.ndarray:
+        """The commanded forward base velocity [m/s] with the object's pose tilted by ``tilt`` about world y."""
+        pose = true_object().copy()
+        q_tilt = np.array([0.0, math.sin(0.5 * tilt), 0.0, math.cos(0.5 * tilt)])
+        pose[:, 3:] = quat_mul(q_tilt, pose[:, 3:])
+        with monkeypatch.context() as patch:
+            patch.setattr(pusher.probe, "object", lambda: pose)
+            actions = pusher(None)
+        return actions[:, 0] * pusher.base_scale[0] + pusher.base_default[0]
+
+    pushing_vx = base_vx(0.0)
+    assert (pushing_vx > 0.2).all(), "the expert should be pushing forward after 3 s"
+    np.testing.assert_allclose(base_vx(0.8 * pusher.cfg.tilt_limit), pushing_vx, rtol=1e-6)
+    np.testing.assert_allclose(base_vx(1.5 * pusher.cfg.tilt_limit), -pusher.cfg.back_off_speed, atol=0.05)
 
 
 def test_walks_around_the_object_within_command_limits(small_env):

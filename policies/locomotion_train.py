@@ -87,6 +87,9 @@ class LocomotionTrainConfig:
         data = {"disturbance_ramp": (0, 0), **data}
         if "p_max" in data:  # runs from before the foot contact force constraint did not terminate on it
             data["p_max"] = {**_no_terminations(), **data["p_max"]}
+        rewards = data.get("env", {}).get("rewards")
+        if rewards is not None and "action_rate_weight" not in rewards:  # runs from before the penalty had none
+            data["env"] = {**data["env"], "rewards": {**rewards, "action_rate_weight": 0.0}}
         randomization = data.get("env", {}).get("randomization", {})
         if isinstance(randomization.get("arm_amplitude"), (int, float)):  # new dicts: the caller's stays as it is
             amplitude = (float(randomization["arm_amplitude"]),) * 5

@@ -115,9 +115,13 @@ def test_disturbance_ramp_in_the_locomotion_config():
     del old_run["disturbance_ramp"]
     old_run["env"]["randomization"]["arm_amplitude"] = 0.8
     del old_run["p_max"]["foot_contact_force"]
+    del old_run["env"]["rewards"]["action_rate_weight"]
     old = LocomotionTrainConfig.from_dict(old_run)
     assert old.p_max["foot_contact_force"] == (0.0, 0.0) and "foot_contact_force" not in old_run["p_max"], \
         "runs from before the foot contact force constraint never terminated on it"
     assert old_run["env"]["randomization"]["arm_amplitude"] == 0.8, "the saved config it read is left unchanged"
     assert old.disturbance_ramp == (0, 0), "runs from before the ramp had it off"
     assert old.env.randomization.arm_amplitude == (0.8,) * 5, "and one arm amplitude for all joints"
+    assert cfg.env.rewards.action_rate_weight > 0.0 and old.env.rewards.action_rate_weight == 0.0, \
+        "runs from before the action-rate penalty had none"
+    assert "action_rate_weight" not in old_run["env"]["rewards"]

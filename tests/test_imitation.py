@@ -180,3 +180,14 @@ def test_a_new_run_starts_from_another_runs_imitation_actor_with_its_own_optimiz
     assert upstream["run"] == "bc" and upstream["iterations"] == 0 and upstream["imitation"]["rounds"] == 1
     assert record["commands"] == [*upstream["commands"], launch["command"]]
     assert record["world_steps"] == 2 * 6 * 8 + 8 * 40  # two iterations of 6 steps in 8 worlds + one DAgger round
+
+
+def test_cli_passes_the_expert_object_size(tmp_path, monkeypatch):
+    from dynpush import cli
+    from dynpush.policies import imitation
+
+    calls = []
+    monkeypatch.setattr(imitation, "imitate", lambda cfg, imitation_cfg, run_dir, **kwargs: calls.append(imitation_cfg))
+    common = ["imitate", "--name", "bc", "--runs", str(tmp_path), "--rounds", "3"]
+    assert cli.main([*common, "--expert-object-size", "0.4"]) == 0 and cli.main(common) == 0
+    assert [(c.rounds, c.expert_object_size) for c in calls] == [(3, 0.4), (3, None)]

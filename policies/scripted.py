@@ -36,6 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dynpush.runtime.frames import tilt_angle
+
 
 def wrap(angle: np.ndarray) -> np.ndarray:
     """Angles wrapped into [-pi, pi)."""
@@ -119,7 +121,6 @@ class ScriptedPusher:
     def __call__(self, observations: np.ndarray) -> np.ndarray:
         """Actions of every world from the true state (``observations`` unused: a policy's call signature)."""
         from dynpush.policies.evaluate import yaw_of
-        from dynpush.runtime.frames import tilt_angle
 
         cfg = self.cfg
         base, obj = self.probe.base(), self.probe.object()

@@ -92,13 +92,18 @@ class ScriptedPusher:
         self.done_distance = 0.6 * rewards.success_distance
         self.done_angle = 0.6 * np.radians(rewards.success_angle_deg)
 
+    def _object_geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per world: the object's full side lengths (n, 3) [m], shape (n,) (0 cuboid, 1 cylinder) and centre of
+        mass in its frame (n, 3) [m]; the task's, or with a nominal ``object_size`` a centred cuboid of that edge."""
+        task, n = self.env.task, self.env.num_envs
+        if self.cfg.object_size is None:
+            return task.object_dims.numpy(), task.object_shape.numpy(), task.object_com_o.numpy()
+        return np.full((n, 3), self.cfg.object_size), np.zeros(n, dtype=int), np.zeros((n, 3))
+
     def _half_extent(self, direction: np.ndarray, object_yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Centre-to-surface distance of the object along ``direction`` (unit, world xy) and the half width
         of the face it meets, across ``direction`` [m]."""
-        if self.cfg.object_size is None:
-            dims, shape = self.env.task.object_dims.numpy(), self.env.task.object_shape.numpy()
-        else:
-            dims, shape = np.full((len(direction), 3), self.cfg.object_size), np.zeros(len(direction), dtype=int)
+        dims, shape, _ = self._object_geometry()
         c, s = np.cos(object_yaw), np.sin(object_yaw)
         local_x = np.abs(c * direction[:, 0] + s * direction[:, 1])
         local_y = np.abs(-s * direction[:, 0] + c * direction[:, 1])
@@ -109,11 +114,8 @@ class ScriptedPusher:
         return np.where(cylinder, 0.5 * dims[:, 0], depth), np.where(cylinder, 0.5 * dims[:, 0], width)
 
     def _com_across(self, side_dir: np.ndarray, object_yaw: np.ndarray) -> np.ndarray:
-        """Offset [m] of the object's centre of mass from its frame origin along ``side_dir`` (unit, world xy);
-        zero with a nominal ``object_size``."""
-        if self.cfg.object_size is not None:
-            return np.zeros(len(side_dir))
-        com_o = self.env.task.object_com_o.numpy()[:, :2]
+        """Offset [m] of the object's centre of mass from its frame origin along ``side_dir`` (unit, world xy)."""
+        com_o = self._object_geometry()[2][:, :2]
         c, s = np.cos(object_yaw), np.sin(object_yaw)
         com_w = np.stack([c * com_o[:, 0] - s * com_o[:, 1], s * com_o[:, 0] + c * com_o[:, 1]], axis=1)
         return (com_w * side_dir).sum(1)

@@ -21,6 +21,8 @@ GROUND_USD: Path = _HERE / "ground.usda"
 ARM_JOINT_NAMES: tuple[str, ...] = ("SH_ROT", "SH_FLE", "EL_FLE", "FA_ROT", "WRIST_1", "WRIST_2")
 #: Arm rigid bodies, base to tip (prim names under ``/Robot``); link i is moved by joint i.
 ARM_LINK_NAMES: tuple[str, ...] = ("shoulder", "upper_arm", "elbow", "forearm", "wrist_1", "wrist_2")
+#: The end-effector's collision sphere on the last arm link; its centre is the end-effector point.
+EE_SHAPE: str = "ee_collision"
 #: Leg collision shapes on the ``base`` body (prim names under ``/Robot/base``).
 LEG_SHAPE_NAMES: tuple[str, ...] = (
     "LF_thigh",
@@ -41,6 +43,7 @@ __all__ = [
     "ARM_LINK_NAMES",
     "CUBOID_USD",
     "CYLINDER_USD",
+    "EE_SHAPE",
     "GROUND_USD",
     "LEG_JOINT_NAMES",
     "LEG_SHAPE_NAMES",

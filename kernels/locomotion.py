@@ -28,6 +28,10 @@ the ground being the plane z = 0), foot air time ``t_min - t_air`` at each touch
 force ``|F_foot| - F_max`` (4: the ground's contact force on each lower leg, foot sphere and shank, at the
 control step's last substep, measured by the solver; ``gather_foot_forces``).
 
+Disturbances (``apply_events``, scaled by the training curriculum's ``disturbance_scale``): random arm targets,
+base pushes, and a horizontal force on the end-effector point, the push-back of a pushed object
+(``sample_ee_force``, applied as a wrench by ``write_ee_force``).
+
 Frames: ``_w`` world, ``_b`` base, ``_h`` heading frame (base yaw only). Legs LF, RF, LH, RH; joints HAA,
 HFE, KFE per leg (``dynpush.assets_usd.LEG_JOINT_NAMES``).
 """
@@ -101,10 +105,12 @@ class LocomotionTask:
     foot_air_time: wp.array2d(dtype=float)  # (N, 4) [s] since the foot left the ground
     touchdown_air_time: wp.array2d(dtype=float)  # (N, 4) [s] air time ended by a touchdown this step, else -1
     base_mass_offset: wp.array(dtype=float)  # (N,) [kg] drawn once per world when the environment is built
+    ee_force_h: wp.array2d(dtype=float)  # (N, 3) [N] external force on the end-effector point, heading frame
     episode_step: wp.array(dtype=int)
     next_command_step: wp.array(dtype=int)
     next_arm_step: wp.array(dtype=int)
     next_push_step: wp.array(dtype=int)
+    next_ee_force_step: wp.array(dtype=int)
     rng_counter: wp.array(dtype=int)
 
 
@@ -126,7 +132,11 @@ class LocomotionParams:
     arm_interval: wp.vec2  # [steps] between arm target changes
     push_interval: wp.vec2  # [steps] between base pushes
     push_velocity: float  # [m/s] max horizontal velocity change of a push
-    disturbance_scale: wp.array(dtype=float)  # (1,) in [0, 1]: multiplies arm_amplitude and push_velocity (training curriculum)
+    ee_force_interval: wp.vec2  # [steps] between end-effector force changes
+    ee_force_probability: float  # share of the end-effector force draws that are not zero
+    ee_force_max: float  # [N] magnitude uniform in [0, ee_force_max]
+    ee_force_spread: float  # [rad] direction uniform within +- spread of the heading frame's -x, horizontal
+    disturbance_scale: wp.array(dtype=float)  # (1,) in [0, 1]: multiplies arm_amplitude, push_velocity and ee_force_max
     start_height: float  # [m] base height at reset
     leg_position_noise: float  # [rad] leg joints uniform within default +- noise at reset
 
@@ -225,6 +235,18 @@ def sample_arm_target(rng: wp.uint32, params: LocomotionParams, task: Locomotion
 
 
 @wp.func
+def sample_ee_force(rng: wp.uint32, params: LocomotionParams, task: LocomotionTask, w: int):
+    """A new end-effector force for world ``w`` (heading frame); ``rng``: a forked stream (``frames.fork_rng``)."""
+    force = wp.vec3(0.0, 0.0, 0.0)
+    if wp.randf(rng) < params.ee_force_probability:
+        magnitude = wp.randf(rng, 0.0, params.ee_force_max * params.disturbance_scale[0])
+        angle = wp.pi + wp.randf(rng, -params.ee_force_spread, params.ee_force_spread)
+        force = wp.vec3(magnitude * wp.cos(angle), magnitude * wp.sin(angle), 0.0)
+    for i in range(3):
+        task.ee_force_h[w, i] = force[i]
+
+
+@wp.func
 def steps_in(u: float, interval: wp.vec2):
     """``u`` in [0, 1) (a ``wp.randf(rng)`` of the caller) mapped onto a whole number of steps in ``interval``."""
     return int(interval[0] + u * (interval[1] - interval[0]))
@@ -257,8 +279,8 @@ def start_episodes(
     """Starts a new episode in every world with ``reset[w] != 0``.
 
     Base at the origin, ``start_height`` above the ground, uniform yaw; legs at their default plus
-    uniform noise, the arm at its default; all velocities zero; a new command, arm target and event
-    schedule. The environment runs forward kinematics afterwards.
+    uniform noise, the arm at its default; all velocities zero; no end-effector force; a new command,
+    arm target and event schedule. The environment runs forward kinematics afterwards.
     """
     w = wp.tid()
     if reset[w] == 0:
@@ -277,11 +299,14 @@ def start_episodes(
     for j in range(NUM_ARM_JOINTS + 1):
         view.joint_q[view.arm_q[w, j]] = params.arm_default[j]
         task.arm_target[w, j] = params.arm_default[j]
+    for i in range(3):
+        task.ee_force_h[w, i] = 0.0
     sample_command(fork_rng(wp.randi(rng)), params, task, w)
     task.episode_step[w] = 0
     task.next_command_step[w] = steps_in(wp.randf(rng), params.command_interval)
     task.next_arm_step[w] = steps_in(wp.randf(rng), params.arm_interval)
     task.next_push_step[w] = steps_in(wp.randf(rng), params.push_interval)
+    task.next_ee_force_step[w] = steps_in(wp.randf(rng), params.ee_force_interval)
 
 
 @wp.kernel
@@ -295,7 +320,7 @@ def start_legs(reset: wp.array(dtype=int), params: LocomotionParams, view: Legge
 @wp.kernel
 def apply_events(seed: int, params: LocomotionParams, view: LeggedView, task: LocomotionTask):
     """Scheduled events of a running episode: a new command, a new arm target, a base push (a uniform
-    horizontal velocity change of the free joint)."""
+    horizontal velocity change of the free joint), a new end-effector force."""
     w = wp.tid()
     step = task.episode_step[w]
     if step >= task.next_command_step[w]:
@@ -313,6 +338,34 @@ def apply_events(seed: int, params: LocomotionParams, view: LeggedView, task: Lo
         view.joint_qd[d0 + 0] = view.joint_qd[d0 + 0] + wp.randf(rng, -push, push)
         view.joint_qd[d0 + 1] = view.joint_qd[d0 + 1] + wp.randf(rng, -push, push)
         task.next_push_step[w] = step + steps_in(wp.randf(rng), params.push_interval)
+    if step >= task.next_ee_force_step[w]:
+        rng = next_rng(seed, task.rng_counter, w)
+        sample_ee_force(fork_rng(wp.randi(rng)), params, task, w)
+        task.next_ee_force_step[w] = step + steps_in(wp.randf(rng), params.ee_force_interval)
+
+
+@wp.kernel
+def write_ee_force(
+    view: LeggedView,
+    task: LocomotionTask,
+    ee_body: wp.array(dtype=int),
+    ee_offset: wp.vec3,
+    body_com: wp.array(dtype=wp.vec3),
+    body_f_0: wp.array(dtype=wp.spatial_vector),
+    body_f_1: wp.array(dtype=wp.spatial_vector),
+):
+    """The end-effector force as the wrench on its link that Newton's solvers apply: ``body_f = (F_w, (p_ee - c_w)
+    x F_w)`` about the link's centre of mass ``c_w`` (world frame, Newton's ``State.body_f`` convention), with
+    ``F_w = R_yaw F_h`` and ``p_ee`` the end-effector point; written into both states the substeps alternate."""
+    w = wp.tid()
+    b = ee_body[w]
+    x_e = view.body_q[b]
+    force_w = wp.quat_rotate(yaw_quat(heading_yaw(wp.transform_get_rotation(view.body_q[view.base_body[w]]))),
+                             wp.vec3(task.ee_force_h[w, 0], task.ee_force_h[w, 1], task.ee_force_h[w, 2]))
+    lever = wp.transform_point(x_e, ee_offset) - wp.transform_point(x_e, body_com[b])
+    wrench = wp.spatial_vector(force_w, wp.cross(lever, force_w))
+    body_f_0[b] = wrench
+    body_f_1[b] = wrench
 
 
 @wp.kernel

@@ -14,7 +14,7 @@ import numpy as np
 import warp as wp
 from pxr import Usd
 
-from dynpush.assets_usd import ARM_JOINT_NAMES, GROUND_USD, LEG_JOINT_NAMES, ROBOT_LEGGED_USD
+from dynpush.assets_usd import ARM_JOINT_NAMES, EE_SHAPE, GROUND_USD, LEG_JOINT_NAMES, ROBOT_LEGGED_USD
 from dynpush.kernels import locomotion as loco
 
 LEGS = ("LF", "RF", "LH", "RH")
@@ -61,6 +61,8 @@ class LeggedScene:
     arm_q: np.ndarray  # (N, 6)
     arm_qd: np.ndarray  # (N, 6)
     shank_body: np.ndarray  # (N, 4)
+    ee_body: np.ndarray  # (N,) the last arm link, which carries the end-effector
+    ee_offset: np.ndarray  # (3,) end-effector point (centre of its collision sphere) in the ee_body frame [m]
 
 
 def _read_defaults() -> tuple[np.ndarray, np.ndarray]:
@@ -127,6 +129,7 @@ def build_legged_scene(num_worlds: int, device: str) -> LeggedScene:
 
     joint = {_leaf(label): j for j, label in enumerate(robot.joint_label)}
     body = {_leaf(label): b for b, label in enumerate(robot.body_label)}
+    ee_shape = next(s for s, label in enumerate(robot.shape_label) if _leaf(label) == EE_SHAPE)
     coords, dofs, bodies = robot.joint_coord_count, robot.joint_dof_count, robot.body_count
     w = np.arange(num_worlds)[:, None]
     q_index = lambda names: w * coords + np.array([robot.joint_q_start[joint[n]] for n in names])  # noqa: E731
@@ -145,6 +148,8 @@ def build_legged_scene(num_worlds: int, device: str) -> LeggedScene:
         arm_q=q_index(ARM_JOINT_NAMES),
         arm_qd=qd_index(ARM_JOINT_NAMES),
         shank_body=w * bodies + np.array([body[f"{leg}_SHANK"] for leg in LEGS]),
+        ee_body=w[:, 0] * bodies + robot.shape_body[ee_shape],
+        ee_offset=np.array(wp.transform_get_translation(robot.shape_transform[ee_shape]), dtype=np.float64),
     )
 
 
@@ -170,10 +175,10 @@ def locomotion_task(num_worlds: int, command: wp.array2d | None = None) -> loco.
     for name, width in (("actions", loco.NUM_LEG_JOINTS), ("last_actions", loco.NUM_LEG_JOINTS),
                         ("leg_target", loco.NUM_LEG_JOINTS), ("leg_velocity_last", loco.NUM_LEG_JOINTS),
                         ("arm_target", loco.NUM_ARM_JOINTS + 1), ("foot_air_time", loco.NUM_FEET),
-                        ("touchdown_air_time", loco.NUM_FEET)):
+                        ("touchdown_air_time", loco.NUM_FEET), ("ee_force_h", 3)):
         setattr(task, name, wp.zeros((n, width), dtype=float))
     task.foot_contact = wp.zeros((n, loco.NUM_FEET), dtype=int)
     task.base_mass_offset = wp.zeros(n, dtype=float)
-    for name in ("episode_step", "next_command_step", "next_arm_step", "next_push_step", "rng_counter"):
+    for name in ("episode_step", "next_command_step", "next_arm_step", "next_push_step", "next_ee_force_step", "rng_counter"):
         setattr(task, name, wp.zeros(n, dtype=int))
     return task

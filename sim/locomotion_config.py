@@ -57,6 +57,14 @@ class LocomotionRandomizationConfig:
     arm_amplitude: tuple[float, ...] = (0.2, 0.6, 0.9, 0.2, 0.5)
     arm_interval_s: tuple[float, float] = (1.0, 3.0)  # ours
     leg_position_noise: float = 0.1  # ours: leg joints uniform within default +- 0.1 rad at reset
+    # Force on the end-effector point (ours): a pushed object pushes back, and the paper's locomotion policy never felt
+    # it (its leg-torque violations; our legged base stalls against the object, README). Horizontal, within +- spread
+    # of the heading frame's -x (back towards the robot), magnitude uniform in [0, max] for a share `probability` of
+    # the draws (else none), a new one every interval. Sliding the task's objects takes mu m g = 4-123 N.
+    ee_force_max: float = 120.0  # [N]
+    ee_force_probability: float = 0.75
+    ee_force_spread: float = math.pi / 4  # [rad]
+    ee_force_interval_s: tuple[float, float] = (1.0, 3.0)
 
     def validate(self, prefix: str = "randomization") -> None:
         _check_range(f"{prefix}.push_interval_s", self.push_interval_s, lo=0.02)
@@ -66,6 +74,11 @@ class LocomotionRandomizationConfig:
             raise ConfigError(f"{prefix}.arm_amplitude must be 5 amplitudes within [0, pi] rad, got {self.arm_amplitude!r}")
         _check_range(f"{prefix}.arm_interval_s", self.arm_interval_s, lo=0.02)
         _check_positive(f"{prefix}.leg_position_noise", self.leg_position_noise, allow_zero=True)
+        _check_positive(f"{prefix}.ee_force_max", self.ee_force_max, allow_zero=True)
+        for name, high in (("ee_force_probability", 1.0), ("ee_force_spread", math.pi)):
+            if not 0.0 <= getattr(self, name) <= high:
+                raise ConfigError(f"{prefix}.{name} must lie in [0, {high:g}], got {getattr(self, name)!r}")
+        _check_range(f"{prefix}.ee_force_interval_s", self.ee_force_interval_s, lo=0.02)
 
 
 @dataclass

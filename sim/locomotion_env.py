@@ -2,10 +2,10 @@
 
 Physics is MuJoCo-Warp through Newton (``SolverMuJoCo`` with MuJoCo's own contacts): XPBD's joint drives
 are not the PD law and its legged robot sinks (README, "Solver cross-check"). One control step (50 Hz)
-is one captured Warp graph: actions -> leg and arm joint targets, ``substeps`` solver steps, feet,
-rewards, the ground's contact force on each lower leg (Newton's ``SensorContact`` on MuJoCo's contact forces
-of the last substep), constraints, terminations, auto-reset, scheduled events (commands, arm targets, pushes) and
-observations. Kernels and layouts: :mod:`dynpush.kernels.locomotion`.
+is one captured Warp graph: actions -> leg and arm joint targets and the end-effector force's wrench, ``substeps``
+solver steps, feet, rewards, the ground's contact force on each lower leg (Newton's ``SensorContact`` on MuJoCo's
+contact forces of the last substep), constraints, terminations, auto-reset, scheduled events (commands, arm
+targets, pushes, end-effector forces) and observations. Kernels and layouts: :mod:`dynpush.kernels.locomotion`.
 """
 
 from __future__ import annotations
@@ -82,6 +82,7 @@ class LocomotionEnv(EnvBase, VecEnv):
         self.view = legged_view(self.state_0, scene.base_body, scene.base_q_start, scene.base_qd_start, scene.robot_qd_count,
                                 scene.leg_q, scene.leg_qd, scene.arm_q, scene.arm_qd, scene.shank_body)
 
+        self.ee_body = wp.array(np.asarray(scene.ee_body, dtype=np.int32), dtype=int)
         self.raw_actions = wp.zeros((n, k.NUM_LEG_JOINTS), dtype=float)
         self.policy_obs = wp.zeros((n, k.NUM_POLICY_OBS), dtype=float)
         self.critic_obs = wp.zeros((n, k.NUM_CRITIC_OBS), dtype=float)
@@ -120,6 +121,9 @@ class LocomotionEnv(EnvBase, VecEnv):
         p.arm_interval = steps(rnd.arm_interval_s)
         p.push_interval = steps(rnd.push_interval_s)
         p.push_velocity = rnd.push_velocity
+        p.ee_force_interval = steps(rnd.ee_force_interval_s)
+        p.ee_force_probability, p.ee_force_max = rnd.ee_force_probability, rnd.ee_force_max
+        p.ee_force_spread = rnd.ee_force_spread
         p.disturbance_scale = f32([1.0])
         p.start_height = cfg.start_height
         p.leg_position_noise = rnd.leg_position_noise
@@ -164,8 +168,8 @@ class LocomotionEnv(EnvBase, VecEnv):
         self.noise_scale = f32(scales)
 
     def set_disturbance_scale(self, scale: float) -> None:
-        """Scales the random arm motions and base pushes (``randomization.arm_amplitude``, ``push_velocity``) by
-        ``scale`` in [0, 1] from their next draw on; the training curriculum's (``schedules.disturbance_scale_at``)."""
+        """Scales the random arm motions, base pushes and end-effector forces (``randomization.arm_amplitude``,
+        ``push_velocity``, ``ee_force_max``) by ``scale`` in [0, 1] from their next draw on; the training curriculum's (``schedules.disturbance_scale_at``)."""
         if not 0.0 <= scale <= 1.0:
             raise ConfigError(f"disturbance scale must lie in [0, 1], got {scale!r}")
         self.params.disturbance_scale.fill_(scale)
@@ -178,6 +182,8 @@ class LocomotionEnv(EnvBase, VecEnv):
         cfg = self.cfg
         self._launch(k.process_leg_actions, [self.raw_actions, self.params, self.view, self.task, self.control.joint_target_q])
         self._launch(k.write_arm_targets, [self.view, self.task, self.control.joint_target_q])
+        self._launch(k.write_ee_force, [self.view, self.task, self.ee_body, wp.vec3(*self.scene.ee_offset),
+                                        self.scene.model.body_com, self.state_0.body_f, self.state_1.body_f])
         dt = cfg.control_dt / cfg.substeps
         for sub in range(cfg.substeps):
             state_in, state_out = (self.state_0, self.state_1) if sub % 2 == 0 else (self.state_1, self.state_0)

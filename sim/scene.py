@@ -16,7 +16,7 @@ import warp as wp
 from pxr import Usd
 
 from dynpush.assets_usd import (
-    ARM_JOINT_NAMES, ARM_LINK_NAMES, CUBOID_USD, CYLINDER_USD, GROUND_USD, LEG_JOINT_NAMES, LEG_SHAPE_NAMES, ROBOT_USD,
+    ARM_JOINT_NAMES, ARM_LINK_NAMES, CUBOID_USD, CYLINDER_USD, EE_SHAPE, GROUND_USD, LEG_JOINT_NAMES, LEG_SHAPE_NAMES, ROBOT_USD,
 )
 from dynpush.kernels.contacts import ROLE_EE, ROLE_NONE, ROLE_OBJECT, ROLE_ROBOT
 
@@ -29,8 +29,6 @@ wp.config.log_level = wp.LOG_WARNING  # no per-module "load on device" lines on 
 OBJECT_COLLISION_PARTS = ("base_collision", *LEG_SHAPE_NAMES, "shoulder", "upper_arm", "elbow", "forearm")
 # ... then self-collisions of these arm links with the base or legs.
 SELF_COLLISION_LINKS = ("upper_arm", "elbow", "forearm", "wrist_1", "wrist_2")
-EE_SHAPE = "ee_collision"
-EE_FRAME = "ee_frame"
 
 
 def _leaf(label: str) -> str:

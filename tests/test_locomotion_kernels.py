@@ -74,7 +74,8 @@ def random_scene(rng, n):
         touchdown_air_time=np.where(rng.uniform(size=(n, 4)) < 0.5, -1.0, rng.uniform(0.0, 0.5, (n, 4))),
         base_mass_offset=rng.uniform(-3, 3, n), episode_step=rng.integers(0, 1000, n),
         next_command_step=rng.integers(0, 1000, n), next_arm_step=rng.integers(0, 1000, n),
-        next_push_step=rng.integers(0, 1000, n), rng_counter=rng.integers(0, 5, n),
+        next_push_step=rng.integers(0, 1000, n), next_ee_force_step=rng.integers(0, 1000, n),
+        ee_force_h=rng.normal(scale=50.0, size=(n, 3)), rng_counter=rng.integers(0, 5, n),
     )
     return as_f32(view), as_f32(task)
 
@@ -95,7 +96,8 @@ def loco_params(rng, **overrides):
         action_scale=0.4, clip=2.5, command_lower=[-1.0, -0.5, -0.8, -0.3, -0.2, 0.3],
         command_upper=[1.5, 0.5, 0.8, 0.3, 0.25, 0.6], standing_probability=0.25, command_interval=(100.0, 200.0),
         arm_amplitude=[0.8, 0.8, 0.8, 0.8, 0.6], arm_interval=(50.0, 150.0), push_interval=(300.0, 400.0), push_velocity=0.5,
-        start_height=0.55, leg_position_noise=0.1, disturbance_scale=[1.0],
+        start_height=0.55, leg_position_noise=0.1, disturbance_scale=[1.0], ee_force_interval=(60.0, 120.0),
+        ee_force_probability=0.6, ee_force_max=80.0, ee_force_spread=0.7,
     )
     values.update(overrides)
     return make_struct(k.LocomotionParams, **values), as_f32({n: np.asarray(v) for n, v in values.items()})
@@ -141,6 +143,37 @@ def test_process_leg_actions_and_arm_targets():
 
 
 # --------------------------------------------------------------------------- feet
+def test_write_ee_force():
+    """The heading-frame end-effector force turned by the base's yaw, as a wrench about the ee link's centre of mass
+    with the force at the end-effector point, in the ee link's rows of both ``body_f`` arrays and nowhere else."""
+    rng = np.random.default_rng(12)
+    n = 500
+    view_np, task_np = random_scene(rng, n)
+    ee_body = view_np["shank_body"][:, 2]  # any link of the world but the base
+    body_com = f32(rng.uniform(-0.1, 0.1, (n * NB, 3)))
+    ee_offset = f32([0.08, -0.02, 0.03])
+    body_f = [f32(rng.normal(size=(n * NB, 6))) for _ in range(2)]
+    view, task = structs(view_np, task_np)
+    out = [arr(f, wp.spatial_vector) for f in body_f]
+    launch(k.write_ee_force, n, view, task, arr(ee_body, int), wp.vec3(*ee_offset), arr(body_com, wp.vec3), *out)
+
+    q = view_np["body_q"]
+    x_base = quat_matrix(q[view_np["base_body"], 3:])[:, :, 0]
+    yaw = np.arctan2(x_base[:, 1], x_base[:, 0])
+    f_h = task_np["ee_force_h"]
+    force_w = np.column_stack([np.cos(yaw) * f_h[:, 0] - np.sin(yaw) * f_h[:, 1],
+                               np.sin(yaw) * f_h[:, 0] + np.cos(yaw) * f_h[:, 1], f_h[:, 2]])
+    x_ee = q[ee_body]
+    p_ee = x_ee[:, :3] + quat_rotate(x_ee[:, 3:], ee_offset)
+    c_ee = x_ee[:, :3] + quat_rotate(x_ee[:, 3:], body_com[ee_body])
+    expected = np.column_stack([force_w, np.cross(p_ee - c_ee, force_w)])
+    others = np.setdiff1d(np.arange(n * NB), ee_body)
+    for before, after in zip(body_f, out):
+        after = after.numpy()
+        close(after[ee_body], expected, rtol=1e-4, atol=1e-3)
+        close(after[others], before[others], atol=0, err_msg="other bodies untouched")
+
+
 def test_update_feet():
     rng = np.random.default_rng(2)
     n, margin, radius = 64, 0.02, 0.03
@@ -364,17 +397,19 @@ def test_start_episodes():
     close(out["arm_target"][r], np.tile(p["arm_default"], (r.sum(), 1)), atol=0)
     np.testing.assert_array_equal(jqd[r], 0.0, err_msg="velocities zeroed")
     for name, value in (("actions", 0), ("last_actions", 0), ("leg_velocity_last", 0), ("foot_contact", 1),
-                        ("foot_air_time", 0), ("touchdown_air_time", -1), ("episode_step", 0)):
+                        ("foot_air_time", 0), ("touchdown_air_time", -1), ("episode_step", 0), ("ee_force_h", 0)):
         np.testing.assert_array_equal(out[name][r], value, err_msg=name)
     check_commands(out["command"][r], p, "start_episodes")
-    for name, (lo, hi) in (("next_command_step", (100, 200)), ("next_arm_step", (50, 150)), ("next_push_step", (300, 400))):
+    for name, (lo, hi) in (("next_command_step", (100, 200)), ("next_arm_step", (50, 150)), ("next_push_step", (300, 400)),
+                           ("next_ee_force_step", (60, 120))):
         s = out[name][r]
         assert s.min() >= lo and s.max() <= hi and s.max() - s.min() > 0.9 * (hi - lo), f"{name} in [{lo}, {hi}]"
     # Every draw is its own (a wp.func gets the rng state by value: draws inside one that did not fork a
     # stream repeated the caller's next draw, tying the event steps together and to the standing decision).
     standing = (out["command"][r, :3] == 0).all(1).astype(float)
     draws = {"standing": standing, "height": out["command"][r, 5], "yaw": yaw,
-             "leg_noise": dev[:, 0], **{name: out[name][r].astype(float) for name in ("next_command_step", "next_arm_step", "next_push_step")}}
+             "leg_noise": dev[:, 0], **{name: out[name][r].astype(float) for name in ("next_command_step", "next_arm_step",
+                                                                                     "next_push_step", "next_ee_force_step")}}
     names = list(draws)
     corr = np.corrcoef(np.array([draws[name] for name in names]))
     np.fill_diagonal(corr, 0.0)
@@ -397,30 +432,31 @@ def check_commands(u, p, label):
 
 @pytest.mark.parametrize("scale", [1.0, 0.5])
 def test_apply_events(scale):
-    """``scale``: the disturbance curriculum's share of the arm amplitudes (0.8, 0.8, 0.8, 0.8, 0.6 rad) and push
-    velocity (0.5 m/s)."""
+    """``scale``: the disturbance curriculum's share of the arm amplitudes (0.8, 0.8, 0.8, 0.8, 0.6 rad), push
+    velocity (0.5 m/s) and end-effector force (up to 80 N)."""
     rng = np.random.default_rng(8)
     n = 6000
     view_np, task_np = random_scene(rng, n)
     step = task_np["episode_step"]
-    for name in ("next_command_step", "next_arm_step", "next_push_step"):
+    events = ("next_command_step", "next_arm_step", "next_push_step", "next_ee_force_step")
+    for name in events:
         task_np[name] = step + rng.integers(-2, 3, n)
-    cmd, arm, push = (step >= task_np[name] for name in ("next_command_step", "next_arm_step", "next_push_step"))
+    cmd, arm, push, force = (step >= task_np[name] for name in events)
     params, p = loco_params(rng, disturbance_scale=[scale])
     amplitude, push_velocity = p["arm_amplitude"] * scale, 0.5 * scale
     view, task = structs(view_np, task_np)
     launch(k.apply_events, n, 5, params, view, task)
     out = read(k.LocomotionTask, task)
 
-    for name, fired in (("command", cmd), ("next_command_step", cmd), ("arm_target", arm), ("next_arm_step", arm),
-                        ("next_push_step", push)):
+    changed = (("command", cmd), ("next_command_step", cmd), ("arm_target", arm), ("next_arm_step", arm),
+               ("next_push_step", push), ("ee_force_h", force), ("next_ee_force_step", force))
+    for name, fired in changed:
         close(out[name][~fired], task_np[name][~fired], atol=0, err_msg=f"{name} without its event")
-    events = ("command", "next_command_step", "arm_target", "next_arm_step", "next_push_step", "rng_counter")
-    for name in (n for n in out if n not in events):
+    for name in (n for n in out if n not in dict(changed) and n != "rng_counter"):
         close(out[name], task_np[name], atol=0, err_msg=name)
-    np.testing.assert_array_equal(out["rng_counter"], task_np["rng_counter"] + cmd + arm + push)
+    np.testing.assert_array_equal(out["rng_counter"], task_np["rng_counter"] + cmd + arm + push + force)
     for name, fired, (lo, hi) in (("next_command_step", cmd, (100, 200)), ("next_arm_step", arm, (50, 150)),
-                                  ("next_push_step", push, (300, 400))):
+                                  ("next_push_step", push, (300, 400)), ("next_ee_force_step", force, (60, 120))):
         d = out[name][fired] - step[fired]
         assert d.min() >= lo and d.max() <= hi and d.max() - d.min() > 0.9 * (hi - lo), f"{name} rescheduled"
 
@@ -446,3 +482,17 @@ def test_apply_events(scale):
     assert (np.abs(dv[push, :2]) <= push_velocity + 1e-5).all() and (np.abs(dv[push, :2]) > 0).mean() > 0.99
     assert np.abs(dv[push, :2]).max() > 0.98 * push_velocity
     close(view.joint_q.numpy(), view_np["joint_q"], atol=0, err_msg="joint_q untouched")
+
+    # End-effector force: none for 1 - probability of the draws, else horizontal, magnitude uniform in
+    # [0, 80 scale] N, direction uniform within +- 0.7 rad of the heading frame's -x.
+    f = out["ee_force_h"][force]
+    magnitude = np.linalg.norm(f, axis=1)
+    on = magnitude > 0
+    assert abs(on.mean() - 0.6) < 4 * math.sqrt(0.24 / len(f)), f"share of forces {on.mean():.3f}"
+    np.testing.assert_array_equal(f[:, 2], 0.0, err_msg="horizontal")
+    f_max = 80.0 * scale
+    assert magnitude.max() <= f_max * (1 + 1e-6) and magnitude.max() > 0.98 * f_max
+    assert abs(np.mean(magnitude[on]) / f_max - 0.5) < 0.03, "uniform magnitude"
+    angle = np.arctan2(-f[on, 1], -f[on, 0])  # from -x
+    assert np.abs(angle).max() <= 0.7 + 1e-5 and angle.min() < -0.68 and angle.max() > 0.68
+    assert abs(np.mean(angle)) < 0.04 and abs(np.corrcoef(angle, magnitude[on])[0, 1]) < 0.1

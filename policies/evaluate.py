@@ -13,7 +13,8 @@
 - time to success (the first step with the success flag, successful episodes only) and the breakdown
   by object shape.
 - ``while_touching``: the end-effector's vertical speed and the object's horizontal acceleration while
-  they touch (:class:`ContactMotionObserver`), which tell a smooth push from a shaking one.
+  they touch (:class:`ContactMotionObserver`), which tell a smooth push from a shaking one, and the base's
+  commanded and achieved forward speed, which tell whether the base keeps its speed against the object.
 
 The environment is the one the policy was trained in: its config comes from the ``training_config``
 of the policy's ONNX metadata, changed only by ``--num-envs``, ``--noise/--no-noise`` and ``--set
@@ -166,6 +167,11 @@ class EnvProbe:
         pose = self._pose(self.ee_body)
         return pose[:, :3] + quat_to_matrix(pose[:, 3:]) @ self.ee_offset
 
+    def base_command(self) -> np.ndarray:
+        """(n, 6) the push policy's absolute base command of the last step (vx, vy [m/s] heading frame, yaw rate
+        [rad/s], roll, pitch [rad], height [m])."""
+        return self.env.task.base_command.numpy().astype(np.float64)
+
     def arm_q(self) -> np.ndarray:
         """(n, 5) absolute positions [rad] of the 5 controlled arm joints."""
         return self.joint_q[self.arm_q_index].cpu().numpy().astype(np.float64)
@@ -273,35 +279,49 @@ class ContactHeightObserver:
 
 
 class ContactMotionObserver:
-    """While the end-effector touches the object: its vertical speed |v_z| [m/s] and the object's horizontal
-    acceleration |a_xy| [m/s^2] (world frame), by finite differences of the poses over the control step.
+    """While the end-effector touches the object, by finite differences of the poses over the control step:
+    its vertical speed |v_z| [m/s], the object's horizontal acceleration |a_xy| [m/s^2] (world frame), and the
+    base's forward speed [m/s] (along its heading at the step's start) beside the forward speed the push policy
+    commanded for the step.
 
     A sample needs the world's episode to have gone on through the two previous steps (three poses of one
     episode). Only the first ``count`` worlds are recorded. On the legged robot the gait shakes the arm, and
-    the object takes the shocks: these figures show it (README, legged mode)."""
+    the object takes the shocks; and a base that stalls against the object falls short of its command: these
+    figures show both (README, legged mode)."""
+
+    SAMPLES = ("ee_vertical_speed", "object_acceleration", "base_commanded_vx", "base_forward_speed")
 
     def __init__(self, env: PushEnv, control_dt: float, count: int):
         self.env, self.dt, self.probe = env, control_dt, EnvProbe(env)
         self.recorded = np.arange(env.num_envs) < count
         self.steps_in_episode = np.zeros(env.num_envs, dtype=int)  # consecutive continuing steps
-        self.ee_z = self.object_xy = self.object_velocity = None
-        self.ee_vertical_speed: list[np.ndarray] = []
-        self.object_acceleration: list[np.ndarray] = []
+        self.ee_z = self.object_xy = self.object_velocity = self.base_pose = None
+        self.samples: dict[str, list[np.ndarray]] = {name: [] for name in self.SAMPLES}
 
     def observe(self, step: int, in_episode: torch.Tensor, continuing: torch.Tensor) -> None:
         going_on = continuing.cpu().numpy()
         self.steps_in_episode = np.where(going_on, self.steps_in_episode + 1, 0)
-        ee_z, object_xy = self.probe.ee_position()[:, 2], self.probe.object()[:, :2]
+        ee_z, object_xy, base_pose = self.probe.ee_position()[:, 2], self.probe.object()[:, :2], self.probe.base()
         if self.ee_z is not None:
             object_velocity = (object_xy - self.object_xy) / self.dt
             if self.object_velocity is not None:
                 touching = self.env.critic_obs_t[:, EE_CONTACT_COLUMN].cpu().numpy() > 0.5
                 sampled = self.recorded & touching & (self.steps_in_episode >= 3)
-                self.ee_vertical_speed.append(np.abs(ee_z - self.ee_z)[sampled] / self.dt)
-                acceleration = np.linalg.norm(object_velocity - self.object_velocity, axis=1) / self.dt
-                self.object_acceleration.append(acceleration[sampled])
+                heading = yaw_of(self.base_pose[:, 3:])
+                forward = np.einsum("ni,ni->n", base_pose[:, :2] - self.base_pose[:, :2],
+                                    np.column_stack([np.cos(heading), np.sin(heading)])) / self.dt
+                values = {"ee_vertical_speed": np.abs(ee_z - self.ee_z) / self.dt,
+                          "object_acceleration": np.linalg.norm(object_velocity - self.object_velocity, axis=1) / self.dt,
+                          "base_commanded_vx": self.probe.base_command()[:, 0], "base_forward_speed": forward}
+                for name, value in values.items():
+                    self.samples[name].append(value[sampled])
             self.object_velocity = object_velocity
-        self.ee_z, self.object_xy = ee_z, object_xy
+        self.ee_z, self.object_xy, self.base_pose = ee_z, object_xy, base_pose
+
+    @staticmethod
+    def pooled(observers: list[ContactMotionObserver], name: str) -> np.ndarray:
+        """The samples ``name`` (one of ``SAMPLES``) of all ``observers`` in one array."""
+        return np.concatenate([x for o in observers for x in o.samples[name]] or [[]])
 
 
 def _percent(mask: np.ndarray) -> float | None:
@@ -381,11 +401,9 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
         "constraint_violation_percent": {name: float(v) for (name, _), v in zip(CONSTRAINT_GROUPS, violation)},
         "time_to_success_s": _stats(time_to_success),
         "episode_length_s": _stats(episodes.length * dt),
-        "while_touching": {
-            "ee_vertical_speed_m_s": _stats(np.concatenate([x for m in motions for x in m.ee_vertical_speed] or [[]])),
-            "object_horizontal_acceleration_m_s2": _stats(
-                np.concatenate([x for m in motions for x in m.object_acceleration] or [[]])),
-        },
+        "while_touching": {key: _stats(ContactMotionObserver.pooled(motions, name)) for key, name in (
+            ("ee_vertical_speed_m_s", "ee_vertical_speed"), ("object_horizontal_acceleration_m_s2", "object_acceleration"),
+            ("base_commanded_vx_m_s", "base_commanded_vx"), ("base_forward_speed_m_s", "base_forward_speed"))},
         "by_shape": by_shape,
         "paper": {"table_I_row": paper_name, "success_rate": paper_success, "toppled_rate": paper_toppled,
                   "constraint_violation_percent": PAPER_TABLE_II},

@@ -48,14 +48,15 @@ def test_eval_writes_tables_json_and_png(policy, tmp_path):
     assert saved["paper"]["table_I_row"] == "Ours (with all the above)"
     assert all(0.0 <= v <= 100.0 for v in saved["constraint_violation_percent"].values())
     assert saved["episode_length_s"]["max"] <= 0.4 + 1e-9
-    assert set(saved["while_touching"]) == {"ee_vertical_speed_m_s", "object_horizontal_acceleration_m_s2"}
+    assert set(saved["while_touching"]) == {"ee_vertical_speed_m_s", "object_horizontal_acceleration_m_s2",
+                                            "base_commanded_vx_m_s", "base_forward_speed_m_s"}
     assert saved["config"]["env"]["randomize_first_episode_length"] is False
     assert is_png(tmp_path / "eval.png")
 
 
 def test_contact_motion_of_hand_made_trajectories(small_env):
-    """Object at constant acceleration (3, 4) m/s^2, end-effector rising at 0.2 m/s. World 0 touches
-    throughout, world 1 touches but its episode restarts after step 2, world 2 never touches, world 3 is
+    """Object at constant acceleration (3, 4) m/s^2, end-effector rising at 0.2 m/s, base heading 2.5 rad and
+    moving at 0.3 m/s along it and 0.1 m/s across, commanded 0.45 m/s forward. World 0 touches throughout, world 1 touches but its episode restarts after step 2, world 2 never touches, world 3 is
     beyond the recorded count."""
     dt, steps = 0.02, 8
     observer = ContactMotionObserver(small_env, dt, count=3)
@@ -70,6 +71,15 @@ def test_contact_motion_of_hand_made_trajectories(small_env):
         def ee_position(self):
             return np.tile([0.0, 0.0, 0.1 + 0.2 * self.t * dt], (4, 1))
 
+        def base(self):
+            heading = 2.5
+            forward, left = np.array([np.cos(heading), np.sin(heading)]), np.array([-np.sin(heading), np.cos(heading)])
+            xy = (0.3 * forward + 0.1 * left) * self.t * dt
+            return np.tile(np.concatenate([xy, [0.45, 0.0, 0.0, np.sin(heading / 2), np.cos(heading / 2)]]), (4, 1))
+
+        def base_command(self):
+            return np.tile([0.45, 0.1, 0.0, 0.0, 0.0, 0.45], (4, 1))
+
     contact = torch.zeros(4, small_env.critic_obs_t.shape[1])
     contact[[0, 1, 3], EE_CONTACT_COLUMN] = 1.0
     observer.env, observer.probe = type("Env", (), {"critic_obs_t": contact})(), Probe()
@@ -77,11 +87,13 @@ def test_contact_motion_of_hand_made_trajectories(small_env):
         observer.probe.t = step + 1  # the state after the step
         continuing = torch.tensor([True, step != 2, True, True])
         observer.observe(step, torch.ones(4, dtype=torch.bool), continuing)
-    speeds, accelerations = np.concatenate(observer.ee_vertical_speed), np.concatenate(observer.object_acceleration)
+    samples = {name: ContactMotionObserver.pooled([observer], name) for name in ContactMotionObserver.SAMPLES}
     # World 0 from step 2 on (3 poses of its episode), world 1 from step 5 on (three steps after its restart).
-    assert len(speeds) == len(accelerations) == (steps - 2) + (steps - 5)
-    np.testing.assert_allclose(speeds, 0.2, rtol=1e-6)
-    np.testing.assert_allclose(accelerations, 5.0, rtol=1e-6)
+    assert {len(v) for v in samples.values()} == {(steps - 2) + (steps - 5)}
+    np.testing.assert_allclose(samples["ee_vertical_speed"], 0.2, rtol=1e-6)
+    np.testing.assert_allclose(samples["object_acceleration"], 5.0, rtol=1e-6)
+    np.testing.assert_allclose(samples["base_forward_speed"], 0.3, rtol=1e-6)
+    np.testing.assert_allclose(samples["base_commanded_vx"], 0.45, rtol=0)
 
 
 def test_eval_counts_only_each_worlds_first_episode(policy, tmp_path):

@@ -90,10 +90,13 @@ class LocomotionTrainConfig:
         rewards = data.get("env", {}).get("rewards")
         if rewards is not None and "action_rate_weight" not in rewards:  # runs from before the penalty had none
             data["env"] = {**data["env"], "rewards": {**rewards, "action_rate_weight": 0.0}}
-        randomization = data.get("env", {}).get("randomization", {})
-        if isinstance(randomization.get("arm_amplitude"), (int, float)):  # new dicts: the caller's stays as it is
-            amplitude = (float(randomization["arm_amplitude"]),) * 5
-            data["env"] = {**data["env"], "randomization": {**randomization, "arm_amplitude": amplitude}}
+        randomization = data.get("env", {}).get("randomization")
+        if randomization is not None:  # new dicts: the caller's stays as it is
+            if isinstance(randomization.get("arm_amplitude"), (int, float)):
+                randomization = {**randomization, "arm_amplitude": (float(randomization["arm_amplitude"]),) * 5}
+            if "ee_force_max" not in randomization:  # runs from before the end-effector forces had none
+                randomization = {**randomization, "ee_force_max": 0.0}
+            data["env"] = {**data["env"], "randomization": randomization}
         return _from_dict(LocomotionTrainConfig, data)
 
     def make_env(self, env: LocomotionEnvConfig):

@@ -116,6 +116,7 @@ def test_disturbance_ramp_in_the_locomotion_config():
     old_run["env"]["randomization"]["arm_amplitude"] = 0.8
     del old_run["p_max"]["foot_contact_force"]
     del old_run["env"]["rewards"]["action_rate_weight"]
+    del old_run["env"]["randomization"]["ee_force_max"]
     old = LocomotionTrainConfig.from_dict(old_run)
     assert old.p_max["foot_contact_force"] == (0.0, 0.0) and "foot_contact_force" not in old_run["p_max"], \
         "runs from before the foot contact force constraint never terminated on it"
@@ -125,3 +126,6 @@ def test_disturbance_ramp_in_the_locomotion_config():
     assert cfg.env.rewards.action_rate_weight > 0.0 and old.env.rewards.action_rate_weight == 0.0, \
         "runs from before the action-rate penalty had none"
     assert "action_rate_weight" not in old_run["env"]["rewards"]
+    assert cfg.env.randomization.ee_force_max > 0.0 and old.env.randomization.ee_force_max == 0.0, \
+        "runs from before the end-effector forces had none"
+    assert "ee_force_max" not in old_run["env"]["randomization"]

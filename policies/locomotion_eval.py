@@ -1,8 +1,8 @@
 """Evaluation of a locomotion policy (``dynpush eval locomotion.onnx``): command tracking per component.
 
 Every world draws one command of the training distribution (``LocomotionEnvConfig.commands``) and holds it
-for ``seconds``; the random arm motions, base pushes and base masses of training go on (at their full size,
-past any training ramp; ``overrides`` changes them). After ``settle_s``
+for ``seconds``; the random arm motions, base pushes, end-effector forces and base masses of training go on (at
+their full size, past any training ramp; ``overrides`` changes them). After ``settle_s``
 the tracking error ``command - measured`` of each component (vx, vy in the heading frame [m/s], yaw rate
 [rad/s], roll, pitch [rad], height [m]; ``LocomotionEnv.tracking_error_t``) is collected in every step of
 the worlds that have not fallen. Writes ``locomotion_eval.json`` (RMS and mean absolute error per

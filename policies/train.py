@@ -297,6 +297,11 @@ def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool 
         if group.rank == 0:
             path = runner.save_interrupted()
             print(f"\ninterrupted: saved {path}; continue with --resume")
+    finally:
+        # gloo's threads must stop before the interpreter exits: left running, a process of a finished run
+        # aborted at exit ("terminate called without an active exception") and torchrun reported the run failed.
+        if torch.distributed.is_initialized():
+            torch.distributed.destroy_process_group()
     return runner
 
 

@@ -38,14 +38,15 @@ def _rank_main(rank: int, world_size: int, port: int, out_dir: str) -> None:
         "network.actor_hidden=(16, 16)", "network.critic_hidden=(16, 16)"])
     runner = train(cfg, Path(out_dir) / "run")
     Path(out_dir, f"rank{rank}.json").write_text(json.dumps({
-        "snapshots": snapshots, "num_envs": runner.env.num_envs, "seed": runner.env.cfg.seed}))
-    torch.distributed.destroy_process_group()
+        "snapshots": snapshots, "num_envs": runner.env.num_envs, "seed": runner.env.cfg.seed,
+        "group_destroyed": not torch.distributed.is_initialized()}))
 
 
 def test_two_gloo_ranks_keep_identical_policies(tmp_path):
     mp.spawn(_rank_main, args=(2, _free_port(), str(tmp_path)), nprocs=2, join=True)
     ranks = [json.loads((tmp_path / f"rank{r}.json").read_text()) for r in range(2)]
     assert [r["num_envs"] for r in ranks] == [8, 8]  # 16 worlds split over two shards
+    assert all(r["group_destroyed"] for r in ranks), "train() ends the process group (gloo's threads stop before exit)"
     assert ranks[0]["seed"] != ranks[1]["seed"]  # each shard draws its own episodes
     assert len(ranks[0]["snapshots"]) == len(ranks[1]["snapshots"]) == 3
     for a, b in zip(ranks[0]["snapshots"], ranks[1]["snapshots"]):

@@ -302,3 +302,16 @@ def test_the_end_effector_force_acts_on_the_end_effector_point():
         checked += int((np.linalg.norm(force_w, axis=1) > 20.0).sum())
     assert checked > 20, "most steps carry a sizeable force"
     assert (env.state_0.body_q.numpy()[scene.base_body, 2] > 1.0).all(), "still in the air"
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("ee_force_max", -1.0, r"randomization.ee_force_max must be a finite number >= 0, got -1.0"),
+    ("ee_force_probability", 1.5, r"randomization.ee_force_probability must lie in \[0, 1\], got 1.5"),
+    ("ee_force_spread", 4.0, r"randomization.ee_force_spread must lie in \[0, 3.14159\], got 4.0"),
+    ("ee_force_interval_s", (2.0, 1.0), r"randomization.ee_force_interval_s must satisfy low <= high"),
+])
+def test_end_effector_force_config_errors_name_the_field(field, value, message):
+    cfg = LocomotionEnvConfig()
+    setattr(cfg.randomization, field, value)
+    with pytest.raises(ConfigError, match=message):
+        cfg.validate()

@@ -11,6 +11,7 @@ import ast
 import contextlib
 import dataclasses
 import json
+import math
 import os
 import signal
 from dataclasses import dataclass, field
@@ -252,8 +253,8 @@ def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool 
     A resumed run uses its own ``config.json``; ``extend_to`` changes its length to that many
     iterations in all (schedules that scale with the run length follow the new length). A new run with
     ``init_from`` (a checkpoint of another run with the same networks, e.g. its ``imitation.pt``) starts from
-    that run's actor and critic with their normalisers; its optimizer (learning rate of ``cfg``), CaT state,
-    iteration count and episodes are its own.
+    that run's actor and critic with their normalisers; its optimizer (learning rate of ``cfg``), action noise
+    (``cfg.network.init_noise_std``), CaT state, iteration count and episodes are its own.
 
     Under torchrun every process runs one shard of ``cfg.env.num_envs`` worlds; gradients and
     normaliser statistics are averaged across processes (rsl_rl), rank 0 logs and saves.
@@ -285,6 +286,7 @@ def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool 
         runner.load(str(checkpoint), restore_env=group.world_size == 1)
     elif init_from is not None:
         runner.load(str(init_from), load_cfg={"actor": True, "critic": True}, restore_env=False)
+        set_action_std(runner.alg.actor, cfg.network.init_noise_std)
     remaining = cfg.iterations - runner.current_learning_iteration
     if remaining <= 0:
         print(f"{run_dir}: all {cfg.iterations} iterations done")
@@ -332,6 +334,16 @@ def source_commit() -> str | None:
     except (OSError, subprocess.CalledProcessError):
         return None
     return commit + ("-dirty" if dirty else "")
+
+
+def set_action_std(actor: torch.nn.Module, std: float) -> None:
+    """Sets the standard deviation of ``actor``'s Gaussian action distribution (every action) to ``std``."""
+    distribution = actor.distribution
+    with torch.no_grad():
+        if distribution.std_type == "scalar":
+            distribution.std_param.fill_(std)
+        else:
+            distribution.log_std_param.fill_(math.log(std))
 
 
 def record_launch(run_dir: Path, command: str | None, procs: int, resume: bool, init_from: Path | None = None) -> None:

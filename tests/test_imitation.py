@@ -159,12 +159,16 @@ def test_expert_regularised_ppo_stores_the_experts_labels_and_pulls_the_actor_to
     assert json.loads((tmp_path / "run" / "config.json").read_text())["imitation_weight"] == [50.0, 10.0]
 
 
-def test_a_new_run_starts_from_another_runs_imitation_actor_with_its_own_optimizer(tmp_path):
+def test_a_new_run_starts_from_another_runs_imitation_actor_with_its_own_optimizer_and_noise(tmp_path):
     checkpoint = imitate(tiny(), tiny_imitation(1), tmp_path / "bc")
-    cfg = apply_overrides(tiny(iterations=2, warmup=2), ["ppo.learning_rate=0.0002", "ppo.schedule=fixed"])
+    cfg = apply_overrides(tiny(iterations=2, warmup=2),
+                          ["ppo.learning_rate=0.0002", "ppo.schedule=fixed", "network.init_noise_std=0.07"])
     runner = train(cfg, tmp_path / "fine", init_from=checkpoint)  # the actor is held in both iterations
     saved = torch.load(checkpoint, weights_only=False)
-    held = {name: value for name, value in runner.alg.actor.state_dict().items() if "normalizer" not in name}
+    actor = runner.alg.actor.state_dict()
+    assert not torch.allclose(saved["actor_state_dict"]["distribution.std_param"], torch.tensor(0.07))
+    torch.testing.assert_close(actor["distribution.std_param"], torch.full((runner.env.num_actions,), 0.07))
+    held = {name: value for name, value in actor.items() if "normalizer" not in name and "std_param" not in name}
     assert any(name.startswith("mlp.") for name in held)  # the normaliser goes on learning from the rollouts
     for name, value in held.items():
         torch.testing.assert_close(value, saved["actor_state_dict"][name], msg=name)

@@ -14,7 +14,8 @@
   by object shape.
 - ``while_touching``: the end-effector's vertical speed and the object's horizontal acceleration while
   they touch (:class:`ContactMotionObserver`), which tell a smooth push from a shaking one, and the base's
-  commanded and achieved forward speed, which tell whether the base keeps its speed against the object.
+  commanded and achieved forward speed, which tell whether the base keeps its speed against the object,
+  also per bin of the force that slides the object (``base_speed_by_sliding_force``).
 
 The environment is the one the policy was trained in: its config comes from the ``training_config``
 of the policy's ONNX metadata, changed only by ``--num-envs``, ``--noise/--no-noise`` and ``--set
@@ -150,6 +151,7 @@ class EnvProbe:
         arm_q_index = np.asarray(scene.arm_q_start)[:, None] + np.arange(NUM_ARM_JOINTS)
         self.arm_q_index = torch.as_tensor(arm_q_index, dtype=torch.long, device=self.body_q.device)
         self.ee_offset = np.asarray(scene.ee_offset, dtype=np.float64)  # in the EE body frame
+        self.gravity = float(np.linalg.norm(scene.model.gravity.numpy()[0]))  # [m/s^2]
 
     def _pose(self, bodies: torch.Tensor) -> np.ndarray:
         return self.body_q[bodies].cpu().numpy().astype(np.float64)
@@ -171,6 +173,12 @@ class EnvProbe:
         """(n, 6) the push policy's absolute base command of the last step (vx, vy [m/s] heading frame, yaw rate
         [rad/s], roll, pitch [rad], height [m])."""
         return self.env.task.base_command.numpy().astype(np.float64)
+
+    def object_sliding_force(self) -> np.ndarray:
+        """(n,) mu m g [N]: the horizontal force that slides the object over the floor (Coulomb; mu the combined
+        coefficient, the mean of the object's own and the floor's as Newton combines them)."""
+        friction = 0.5 * (self.env.task.object_friction.numpy() + self.env.scene.ground_friction)
+        return friction * self.env.task.object_mass.numpy() * self.gravity
 
     def arm_q(self) -> np.ndarray:
         """(n, 5) absolute positions [rad] of the 5 controlled arm joints."""
@@ -289,7 +297,8 @@ class ContactMotionObserver:
     the object takes the shocks; and a base that stalls against the object falls short of its command: these
     figures show both (README, legged mode)."""
 
-    SAMPLES = ("ee_vertical_speed", "object_acceleration", "base_commanded_vx", "base_forward_speed")
+    SAMPLES = ("ee_vertical_speed", "object_acceleration", "base_commanded_vx", "base_forward_speed", "object_sliding_force")
+    SLIDING_FORCE_BINS = (0.0, 30.0, 60.0, 90.0, np.inf)  # [N] of mu m g: the task's objects need 4-123 N
 
     def __init__(self, env: PushEnv, control_dt: float, count: int):
         self.env, self.dt, self.probe = env, control_dt, EnvProbe(env)
@@ -312,7 +321,8 @@ class ContactMotionObserver:
                                     np.column_stack([np.cos(heading), np.sin(heading)])) / self.dt
                 values = {"ee_vertical_speed": np.abs(ee_z - self.ee_z) / self.dt,
                           "object_acceleration": np.linalg.norm(object_velocity - self.object_velocity, axis=1) / self.dt,
-                          "base_commanded_vx": self.probe.base_command()[:, 0], "base_forward_speed": forward}
+                          "base_commanded_vx": self.probe.base_command()[:, 0], "base_forward_speed": forward,
+                          "object_sliding_force": self.probe.object_sliding_force()}
                 for name, value in values.items():
                     self.samples[name].append(value[sampled])
             self.object_velocity = object_velocity
@@ -322,6 +332,20 @@ class ContactMotionObserver:
     def pooled(observers: list[ContactMotionObserver], name: str) -> np.ndarray:
         """The samples ``name`` (one of ``SAMPLES``) of all ``observers`` in one array."""
         return np.concatenate([x for o in observers for x in o.samples[name]] or [[]])
+
+    @classmethod
+    def base_speed_by_sliding_force(cls, observers: list[ContactMotionObserver]) -> list[dict]:
+        """Per bin of the object's ``mu m g``: the samples' count and the medians of the commanded and the achieved
+        forward speed of the base [m/s]. A base that stalls against heavy objects keeps its speed only on light ones."""
+        force = cls.pooled(observers, "object_sliding_force")
+        commanded, achieved = cls.pooled(observers, "base_commanded_vx"), cls.pooled(observers, "base_forward_speed")
+        rows = []
+        for low, high in zip(cls.SLIDING_FORCE_BINS[:-1], cls.SLIDING_FORCE_BINS[1:]):
+            inside = (force >= low) & (force < high)
+            rows.append({"sliding_force_n": [low, None if np.isinf(high) else high], "count": int(inside.sum()),
+                         "commanded_vx_median": float(np.median(commanded[inside])) if inside.any() else None,
+                         "forward_speed_median": float(np.median(achieved[inside])) if inside.any() else None})
+        return rows
 
 
 def _percent(mask: np.ndarray) -> float | None:
@@ -403,7 +427,9 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
         "episode_length_s": _stats(episodes.length * dt),
         "while_touching": {key: _stats(ContactMotionObserver.pooled(motions, name)) for key, name in (
             ("ee_vertical_speed_m_s", "ee_vertical_speed"), ("object_horizontal_acceleration_m_s2", "object_acceleration"),
-            ("base_commanded_vx_m_s", "base_commanded_vx"), ("base_forward_speed_m_s", "base_forward_speed"))},
+            ("base_commanded_vx_m_s", "base_commanded_vx"), ("base_forward_speed_m_s", "base_forward_speed"),
+            ("object_sliding_force_n", "object_sliding_force"))}
+        | {"base_speed_by_sliding_force": ContactMotionObserver.base_speed_by_sliding_force(motions)},
         "by_shape": by_shape,
         "paper": {"table_I_row": paper_name, "success_rate": paper_success, "toppled_rate": paper_toppled,
                   "constraint_violation_percent": PAPER_TABLE_II},

@@ -49,7 +49,10 @@ def test_eval_writes_tables_json_and_png(policy, tmp_path):
     assert all(0.0 <= v <= 100.0 for v in saved["constraint_violation_percent"].values())
     assert saved["episode_length_s"]["max"] <= 0.4 + 1e-9
     assert set(saved["while_touching"]) == {"ee_vertical_speed_m_s", "object_horizontal_acceleration_m_s2",
-                                            "base_commanded_vx_m_s", "base_forward_speed_m_s"}
+                                            "base_commanded_vx_m_s", "base_forward_speed_m_s", "object_sliding_force_n",
+                                            "base_speed_by_sliding_force"}
+    bins = saved["while_touching"]["base_speed_by_sliding_force"]
+    assert sum(row["count"] for row in bins) == saved["while_touching"]["base_forward_speed_m_s"]["count"]
     assert saved["config"]["env"]["randomize_first_episode_length"] is False
     assert is_png(tmp_path / "eval.png")
 
@@ -80,6 +83,9 @@ def test_contact_motion_of_hand_made_trajectories(small_env):
         def base_command(self):
             return np.tile([0.45, 0.1, 0.0, 0.0, 0.0, 0.45], (4, 1))
 
+        def object_sliding_force(self):
+            return np.array([20.0, 70.0, 40.0, 100.0])
+
     contact = torch.zeros(4, small_env.critic_obs_t.shape[1])
     contact[[0, 1, 3], EE_CONTACT_COLUMN] = 1.0
     observer.env, observer.probe = type("Env", (), {"critic_obs_t": contact})(), Probe()
@@ -94,6 +100,23 @@ def test_contact_motion_of_hand_made_trajectories(small_env):
     np.testing.assert_allclose(samples["object_acceleration"], 5.0, rtol=1e-6)
     np.testing.assert_allclose(samples["base_forward_speed"], 0.3, rtol=1e-6)
     np.testing.assert_allclose(samples["base_commanded_vx"], 0.45, rtol=0)
+    np.testing.assert_array_equal(np.sort(samples["object_sliding_force"]), [20.0] * (steps - 2) + [70.0] * (steps - 5))
+    bins = ContactMotionObserver.base_speed_by_sliding_force([observer])
+    assert [row["count"] for row in bins] == [steps - 2, 0, steps - 5, 0]
+    assert bins[0]["sliding_force_n"] == [0.0, 30.0] and bins[-1]["sliding_force_n"] == [90.0, None]
+    assert bins[1]["commanded_vx_median"] is None and bins[1]["forward_speed_median"] is None
+    assert bins[2]["commanded_vx_median"] == pytest.approx(0.45) and bins[2]["forward_speed_median"] == pytest.approx(0.3)
+
+
+def test_object_sliding_force_is_mu_m_g_with_the_randomised_combined_friction(small_env):
+    """The probe inverts the sampler's object coefficient (2 mu - floor): mu = F / (m g) lies in the task's range."""
+    from dynpush.policies.evaluate import EnvProbe
+
+    force = EnvProbe(small_env).object_sliding_force()
+    mu = force / (small_env.task.object_mass.numpy() * 9.81)
+    low, high = small_env.cfg.randomization.friction
+    assert force.shape == (small_env.num_envs,) and np.all((mu >= low - 1e-6) & (mu <= high + 1e-6))
+    assert np.ptp(mu) > 0.05  # randomised, not one constant
 
 
 def test_eval_counts_only_each_worlds_first_episode(policy, tmp_path):

@@ -28,7 +28,7 @@ from __future__ import annotations
 import torch
 from tensordict import TensorDict
 
-from .scripted import ScriptedPusher
+from .scripted import ScriptedPusher, ScriptedPusherConfig
 
 EXPERT_ACTION_GROUP = "expert_action"
 
@@ -39,9 +39,9 @@ class ExpertLabelledEnv:
     Everything but :meth:`get_observations` and :meth:`step` is the wrapped environment's.
     """
 
-    def __init__(self, env):
+    def __init__(self, env, expert: ScriptedPusherConfig | None = None):
         self.env = env
-        self.expert = ScriptedPusher(env)
+        self.expert = ScriptedPusher(env, expert)
 
     def __getattr__(self, name: str):
         return getattr(self.env, name)

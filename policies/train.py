@@ -85,6 +85,10 @@ class TrainConfig:
     # Weight of the scripted pusher's imitation term in PPO's loss, (first, last iteration), linear in between
     # (ours, policies/expert_regularization.py); (0, 0) is plain CaT-PPO.
     imitation_weight: tuple[float, float] = (0.0, 0.0)
+    # The imitation term's expert: None reads the true object size, shape and centre of mass; an edge [m] makes it
+    # treat every object as a centred cuboid of that edge (ScriptedPusherConfig.object_size), the teacher of a
+    # ``dynpush imitate --expert-object-size`` student.
+    expert_object_size: float | None = None
 
     @staticmethod
     def preset_config(name: str) -> TrainConfig:
@@ -119,6 +123,8 @@ class TrainConfig:
                 raise ConfigError(f"p_max_overrides[{name!r}] must be (initial, final) within [0, 1], got {pair!r}")
         if len(self.imitation_weight) != 2 or not all(w >= 0.0 for w in self.imitation_weight):
             raise ConfigError(f"imitation_weight must be (first, last) with both >= 0, got {self.imitation_weight!r}")
+        if self.expert_object_size is not None and not 0.0 < self.expert_object_size <= 2.0:
+            raise ConfigError(f"expert_object_size must be None or in (0, 2] m, got {self.expert_object_size!r}")
         if self.ppo.schedule not in ("adaptive", "fixed"):
             raise ConfigError(f"ppo.schedule must be 'adaptive' or 'fixed', got {self.ppo.schedule!r}")
         return self
@@ -131,8 +137,11 @@ class TrainConfig:
         from dynpush.sim.push_env import make_push_env
 
         from .expert_regularization import ExpertLabelledEnv
+        from .scripted import ScriptedPusherConfig
 
-        return ExpertLabelledEnv(make_push_env(env)) if max(self.imitation_weight) > 0 else make_push_env(env)
+        if max(self.imitation_weight) == 0:
+            return make_push_env(env)
+        return ExpertLabelledEnv(make_push_env(env), ScriptedPusherConfig(object_size=self.expert_object_size))
 
     @staticmethod
     def from_dict(data: dict) -> TrainConfig:
@@ -206,6 +215,15 @@ def apply_overrides(cfg: TrainConfig, overrides: list[str]) -> TrainConfig:
         except (ValueError, SyntaxError):
             value = text
         current = getattr(target, leaf)
+        annotation = str(next(f.type for f in dataclasses.fields(target) if f.name == leaf))
+        if current is None or value is None:  # an optional field, e.g. ``float | None``: its annotation's types
+            allowed = [name.strip() for name in annotation.split("|")]
+            if "float" in allowed and isinstance(value, int) and not isinstance(value, bool):
+                value = float(value)
+            if ("None" if value is None else type(value).__name__) not in allowed:
+                raise ConfigError(f"{path} must be {annotation}, got {text!r}")
+            setattr(target, leaf, value)
+            continue
         if isinstance(current, float) and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)
         if isinstance(current, tuple) and isinstance(value, list):

@@ -136,6 +136,12 @@ def test_expert_regularised_ppo_stores_the_experts_labels_and_pulls_the_actor_to
     np.testing.assert_allclose(observations[EXPERT_ACTION_GROUP].numpy(), expert(None), atol=1e-6)
     with pytest.raises(ConfigError, match="imitation_weight must be"):
         apply_overrides(tiny(), ["imitation_weight=(-1.0, 0.0)"]).validate()
+    with pytest.raises(ConfigError, match="expert_object_size must be None or in"):
+        apply_overrides(tiny(), ["expert_object_size=0.0"]).validate()
+    with pytest.raises(ConfigError, match=r"expert_object_size must be float \| None, got 'big'"):
+        apply_overrides(tiny(), ["expert_object_size=big"])
+    assert apply_overrides(tiny(), ["expert_object_size=1", "expert_object_size=None"]).expert_object_size is None
+    assert apply_overrides(tiny(), ["expert_object_size=1"]).expert_object_size == 1.0
 
     distances, weights, logged = [], [], []
     original = CaTPPO.update
@@ -157,6 +163,18 @@ def test_expert_regularised_ppo_stores_the_experts_labels_and_pulls_the_actor_to
     assert all("imitation" in losses and "symmetry" not in losses for losses in logged)
     assert distances[-1] < 0.5 * distances[0]  # a random actor moves toward the expert's actions
     assert json.loads((tmp_path / "run" / "config.json").read_text())["imitation_weight"] == [50.0, 10.0]
+
+
+def test_the_imitation_term_can_take_the_nominal_size_teacher_of_a_dagger_student():
+    from dynpush.policies.expert_regularization import EXPERT_ACTION_GROUP
+    from dynpush.policies.scripted import ScriptedPusher, ScriptedPusherConfig
+
+    cfg = apply_overrides(tiny(), ["imitation_weight=(1.0, 0.0)", "expert_object_size=0.4", "env.num_envs=32"])
+    env = cfg.make_env(cfg.validate().env)
+    labels = env.get_observations()[EXPERT_ACTION_GROUP].numpy()
+    nominal = ScriptedPusher(env.env, ScriptedPusherConfig(object_size=0.4))(None)
+    np.testing.assert_allclose(labels, nominal, atol=1e-6)
+    assert np.abs(labels - ScriptedPusher(env.env)(None)).max() > 0.05  # not the privileged teacher's
 
 
 def test_a_new_run_starts_from_another_runs_imitation_actor_with_its_own_optimizer_and_noise(tmp_path):

@@ -35,7 +35,7 @@ from tqdm import tqdm
 
 from dynpush.sim.config import ConfigError
 
-from .scripted import ScriptedPusher, ScriptedPusherConfig
+from .scripted import ScriptedPusher, ScriptedPusherConfig, check_object_size
 from .train import IMITATION_CHECKPOINT, TrainConfig, record_launch, sigterm_as_keyboard_interrupt
 
 
@@ -63,8 +63,7 @@ class ImitationConfig:
             raise ConfigError(f"imitation.expert_share must lie in [0, 1], got {self.expert_share!r}")
         if not self.learning_rate > 0.0:
             raise ConfigError(f"imitation.learning_rate must be > 0, got {self.learning_rate!r}")
-        if self.expert_object_size is not None and not 0.0 < self.expert_object_size <= 2.0:
-            raise ConfigError(f"imitation.expert_object_size must be None or in (0, 2] m, got {self.expert_object_size!r}")
+        check_object_size("imitation.expert_object_size", self.expert_object_size)
         return self
 
 

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dynpush.runtime.frames import tilt_angle
+from dynpush.sim.config import ConfigError
 
 
 def wrap(angle: np.ndarray) -> np.ndarray:
@@ -77,6 +78,12 @@ class ScriptedPusherConfig:
     tilt_limit: float = 0.1  # rad of object tilt (its z axis from the world's) above which a push backs off
     back_off_speed: float = 0.3  # m/s
     object_size: float | None = None  # m: None reads the true size, shape and centre of mass; else a nominal cuboid edge
+
+
+def check_object_size(name: str, size: float | None) -> None:
+    """Raises a ConfigError naming ``name`` unless ``size`` is None or a nominal object edge in (0, 2] m."""
+    if size is not None and not 0.0 < size <= 2.0:
+        raise ConfigError(f"{name} must be None or in (0, 2] m, got {size!r}")
 
 
 class ScriptedPusher:

@@ -26,6 +26,7 @@ from dynpush.kernels.constraints import CONSTRAINT_GROUPS
 
 from .curriculum import GoalCurriculumConfig
 from .runner import CaTOnPolicyRunner
+from .scripted import ScriptedPusherConfig, check_object_size
 from .schedules import ConstraintCurriculumConfig
 
 if TYPE_CHECKING:
@@ -123,8 +124,7 @@ class TrainConfig:
                 raise ConfigError(f"p_max_overrides[{name!r}] must be (initial, final) within [0, 1], got {pair!r}")
         if len(self.imitation_weight) != 2 or not all(w >= 0.0 for w in self.imitation_weight):
             raise ConfigError(f"imitation_weight must be (first, last) with both >= 0, got {self.imitation_weight!r}")
-        if self.expert_object_size is not None and not 0.0 < self.expert_object_size <= 2.0:
-            raise ConfigError(f"expert_object_size must be None or in (0, 2] m, got {self.expert_object_size!r}")
+        check_object_size("expert_object_size", self.expert_object_size)
         if self.ppo.schedule not in ("adaptive", "fixed"):
             raise ConfigError(f"ppo.schedule must be 'adaptive' or 'fixed', got {self.ppo.schedule!r}")
         return self
@@ -137,7 +137,6 @@ class TrainConfig:
         from dynpush.sim.push_env import make_push_env
 
         from .expert_regularization import ExpertLabelledEnv
-        from .scripted import ScriptedPusherConfig
 
         if max(self.imitation_weight) == 0:
             return make_push_env(env)

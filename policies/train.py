@@ -11,7 +11,6 @@ import ast
 import contextlib
 import dataclasses
 import json
-import math
 import os
 import signal
 from dataclasses import dataclass, field
@@ -214,21 +213,18 @@ def apply_overrides(cfg: TrainConfig, overrides: list[str]) -> TrainConfig:
         except (ValueError, SyntaxError):
             value = text
         current = getattr(target, leaf)
-        annotation = str(next(f.type for f in dataclasses.fields(target) if f.name == leaf))
+        expected = f"of type {type(current).__name__}"
+        allowed = [type(current).__name__]
         if current is None or value is None:  # an optional field, e.g. ``float | None``: its annotation's types
+            annotation = str(next(f.type for f in dataclasses.fields(target) if f.name == leaf))
             allowed = [name.strip() for name in annotation.split("|")]
-            if "float" in allowed and isinstance(value, int) and not isinstance(value, bool):
-                value = float(value)
-            if ("None" if value is None else type(value).__name__) not in allowed:
-                raise ConfigError(f"{path} must be {annotation}, got {text!r}")
-            setattr(target, leaf, value)
-            continue
-        if isinstance(current, float) and isinstance(value, int) and not isinstance(value, bool):
+            expected = annotation if current is None else expected
+        if "float" in allowed and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)
         if isinstance(current, tuple) and isinstance(value, list):
             value = tuple(value)
-        if type(value) is not type(current):
-            raise ConfigError(f"{path} must be of type {type(current).__name__}, got {text!r}")
+        if ("None" if value is None else type(value).__name__) not in allowed:
+            raise ConfigError(f"{path} must be {expected}, got {text!r}")
         setattr(target, leaf, value)
     return cfg
 
@@ -354,13 +350,10 @@ def source_commit() -> str | None:
 
 
 def set_action_std(actor: torch.nn.Module, std: float) -> None:
-    """Sets the standard deviation of ``actor``'s Gaussian action distribution (every action) to ``std``."""
-    distribution = actor.distribution
+    """Sets the standard deviation of ``actor``'s Gaussian action distribution (every action) to ``std``; the
+    distribution is rsl_rl's with a scalar std parameter (``rsl_rl_runner_cfg``)."""
     with torch.no_grad():
-        if distribution.std_type == "scalar":
-            distribution.std_param.fill_(std)
-        else:
-            distribution.log_std_param.fill_(math.log(std))
+        actor.distribution.std_param.fill_(std)
 
 
 def record_launch(run_dir: Path, command: str | None, procs: int, resume: bool, init_from: Path | None = None) -> None:

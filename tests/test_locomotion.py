@@ -18,6 +18,7 @@ from dynpush.policies.locomotion_train import LocomotionTrainConfig
 from dynpush.policies.train import train
 from dynpush.runtime.errors import StartupError
 from dynpush.runtime.locomotion import OnnxLocomotion, read_locomotion_contract
+from dynpush.runtime.frames import tilt_angle
 from dynpush.runtime.observation import quat_to_matrix
 from dynpush.runtime.packets import Proprioception
 from dynpush.runtime.tick_log import read_log
@@ -339,8 +340,7 @@ def test_objects_left_alone_stand_still_beside_stamping_legged_robots():
         env.set_leg_targets(targets)
         env.step(torch.zeros(n, env.num_actions))
         restarted |= env.reset_t.numpy() != 0  # a stamping robot may fall: its world starts a new episode
-        z_axis = quat_to_matrix(env.state_0.body_q.numpy()[object_body, 3:7].astype(np.float64))[:, :, 2]
-        largest_tilt = np.maximum(largest_tilt, np.arccos(np.clip(z_axis[:, 2], -1.0, 1.0)))
+        largest_tilt = np.maximum(largest_tilt, tilt_angle(env.state_0.body_q.numpy()[object_body, 3:7]))
     assert largest_tilt.max() < 0.02, f"objects tilted by up to {largest_tilt.max():.3f} rad"
     moved = np.linalg.norm(env.state_0.body_q.numpy()[object_body, :3] - start[:, :3], axis=1)[~restarted]
     assert moved.size >= n // 2 and moved.max() < 0.01, f"{moved.size} objects, moved by up to {moved.max():.3f} m"

@@ -71,6 +71,9 @@ class CaTPPO(PPO):
         self.on_rollout_start: Callable[[], None] | None = None
         """Called before the first action of every rollout (the runner applies its schedules here)."""
 
+        self.value_explained_variance = float("nan")
+        """``explained_variance`` of the last rollout's returns by the values stored with it (set by compute_returns)."""
+
     def set_p_max(self, p_max: torch.Tensor) -> None:
         """Set the per-column maximum termination probability ``[C]``."""
         if p_max.shape != self.c_max.shape:
@@ -138,15 +141,18 @@ class CaTPPO(PPO):
             advantage = delta + next_is_not_terminal * self.gamma * self.lam * advantage
             st.returns[step] = advantage + st.values[step]
         st.advantages = st.returns - st.values
+        self.value_explained_variance = explained_variance(st.values, st.returns)
         if not self.normalize_advantage_per_mini_batch:
             st.advantages = (st.advantages - st.advantages.mean()) / (st.advantages.std() + 1e-8)
 
     def update(self) -> dict[str, float]:
         """rsl_rl's PPO update; the expert-imitation term, which rides on rsl_rl's symmetry-loss hook
-        (:mod:`dynpush.policies.expert_regularization`), is reported as ``imitation``."""
+        (:mod:`dynpush.policies.expert_regularization`), is reported as ``imitation``, and the explained variance
+        of the rollout's returns by the critic's values before the update as ``value_explained_variance``."""
         losses = super().update()
         if isinstance(self.symmetry, ExpertImitationLoss):
             losses["imitation"] = losses.pop("symmetry")
+        losses["value_explained_variance"] = self.value_explained_variance
         return losses
 
     def save(self) -> dict:
@@ -178,3 +184,12 @@ class CaTPPO(PPO):
         for (name, _), group in zip(self.constraint_groups, violated):
             log[f"CaT/violation_rate/{name}"] = group.any(dim=1).float().mean()
         return log
+
+
+def explained_variance(values: torch.Tensor, returns: torch.Tensor) -> float:
+    """``1 - Var(returns - values) / Var(returns)`` over all transitions: 1 for a critic that predicts the GAE
+    returns exactly, 0 for one that predicts their mean, negative for worse; NaN when the returns are constant."""
+    variance = returns.var()
+    if variance == 0:
+        return float("nan")
+    return float(1.0 - (returns - values).var() / variance)

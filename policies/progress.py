@@ -53,7 +53,9 @@ class ProgressLogger(Logger):
             self.writer.add_scalar(key.lstrip("/"), value, it)
         with contextlib.redirect_stdout(io.StringIO()):
             super().log(it, start_it, total_it, collect_time, learn_time, **kwargs)
-        record = {"iteration": it, "time": time.time(), "collect_s": collect_time, "learn_s": learn_time, **summary}
+        record = {"iteration": it, "time": time.time(), "collect_s": collect_time, "learn_s": learn_time, **summary,
+                  "action_std": float(kwargs["action_std"].detach().mean()), "learning_rate": float(kwargs["learning_rate"]),
+                  **{f"loss/{key}": float(value) for key, value in kwargs["loss_dict"].items()}}
         with open(os.path.join(self.log_dir, "progress.jsonl"), "a") as f:
             f.write(json.dumps(record) + "\n")
         if self.bar is None:
@@ -69,7 +71,8 @@ class ProgressLogger(Logger):
         self.bar.write(
             f"it {it:5d} | {steps / collect_time:7.0f} world-steps/s | sim {collect_time:5.2f}s update {learn_time:5.2f}s"
             f" | episode reward {episode_reward:8.2f} {rewards} | {episodes}"
-            f" | delta {summary.get('CaT/mean_delta', float('nan')):.4f} | violated: {violations}"
+            f" | delta {summary.get('CaT/mean_delta', float('nan')):.4f} | std {record['action_std']:.3f}"
+            f" | value ev {record.get('loss/value_explained_variance', float('nan')):.2f} | violated: {violations}"
             + "".join(f" | {key.rsplit('/', 1)[-1]} {value:.3f}" for key, value in self.run_state.items())
         )
         self.bar.update(1)

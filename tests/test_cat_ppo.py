@@ -11,7 +11,8 @@ from tensordict import TensorDict
 from rsl_rl.algorithms import PPO
 from rsl_rl.env import VecEnv
 
-from dynpush.policies.cat_ppo import CaTPPO
+from dynpush.policies.cat_ppo import CaTPPO, explained_variance
+from dynpush.policies.progress import read_progress
 from dynpush.policies.runner import CaTOnPolicyRunner
 from dynpush.policies.schedules import CONSTRAINT_GROUPS, p_max_at
 
@@ -161,6 +162,22 @@ def test_hand_computed_returns_with_delta_timeout_and_done():
     assert alg.c_max.tolist() == pytest.approx(c_max)
 
 
+def test_value_explained_variance_of_the_rollout_against_numpy():
+    env = FakePushEnv(seed=4)
+    alg = build(env, make_cfg())
+    alg.set_p_max(p_max_at(0, 20000))
+    rollout(alg, env, env.get_observations(), 4)
+    values, returns = alg.storage.values.numpy().ravel(), alg.storage.returns.numpy().ravel()
+    reference = 1.0 - np.var(returns - values, ddof=1) / np.var(returns, ddof=1)
+    assert alg.value_explained_variance == pytest.approx(reference, rel=1e-4)
+    assert alg.update()["value_explained_variance"] == alg.value_explained_variance
+    returns = torch.tensor(returns)
+    assert explained_variance(returns, returns) == 1.0
+    assert explained_variance(torch.full_like(returns, float(returns.mean())), returns) == pytest.approx(0.0, abs=1e-6)
+    assert explained_variance(-returns, returns) == pytest.approx(-3.0, rel=1e-5)  # Var(2 R) / Var(R) = 4
+    assert np.isnan(explained_variance(returns, torch.ones_like(returns)))
+
+
 def test_zero_delta_matches_rsl_rl_ppo_exactly():
     results = []
     for class_name in ("PPO", "dynpush.policies.cat_ppo:CaTPPO"):
@@ -249,6 +266,11 @@ def test_runner_learns_two_iterations(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "| delta " in out and " coll " in out  # the runner's one-line summary of the CaT statistics
     assert os.path.isfile(tmp_path / "model_1.pt")
+    record = read_progress(tmp_path)[-1]
+    assert record["action_std"] == pytest.approx(float(runner.alg.actor.output_std.detach().mean()))
+    assert record["learning_rate"] == runner.alg.learning_rate
+    assert {"loss/surrogate", "loss/value", "loss/entropy", "loss/value_explained_variance"} <= set(record)
+    assert record["loss/value_explained_variance"] == runner.alg.value_explained_variance
 
     resumed = CaTOnPolicyRunner(FakePushEnv(), copy.deepcopy(cfg), device="cpu")
     resumed.load(str(tmp_path / "model_1.pt"))

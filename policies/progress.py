@@ -168,8 +168,8 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     rates = {k.rsplit("/", 1)[-1]: smooth(100.0 * series(k)) for k in episode_keys}  # success, toppled; locomotion: fell
     colors = {"success": "tab:green", "toppled": "tab:red", "fell": "tab:brown"}
     difficulty = series("/curriculum/goal_difficulty")
-    fig = Figure(figsize=(8.0, 7.5 if records else 3.5), layout="constrained")
-    axes = list(np.atleast_1d(fig.subplots(3 if records else 1, 1, sharex=True)))  # a DAgger-only run: rates only
+    fig = Figure(figsize=(8.0, 9.5 if records else 3.5), layout="constrained")
+    axes = list(np.atleast_1d(fig.subplots(4 if records else 1, 1, sharex=True)))  # a DAgger-only run: rates only
     ax_rate = axes[0]
     for name, values in rates.items():
         ax_rate.plot(hours, values, color=colors.get(name), label=f"{name} (episodes ended in the iteration)")
@@ -186,7 +186,7 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     ax_rate.set_ylim(-2, 102)
     ax_rate.legend(fontsize=8, loc="upper left")
     if records:
-        ax_reward, ax_delta = axes[1:]
+        ax_reward, ax_delta, ax_policy = axes[1:]
         for key in dict.fromkeys(k for r in records for k in r if k.startswith("/reward/")):
             ax_reward.plot(hours, smooth(series(key)), label=key.rsplit("/", 1)[-1] + " reward term (mean over worlds)")
         ax_reward.set_ylabel("reward")
@@ -195,6 +195,11 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
         ax_delta.plot(hours, smooth(series("CaT/mean_delta")), color="k", label="CaT mean termination probability delta")
         ax_delta.set_ylabel("delta")
         ax_delta.legend(fontsize=8, loc="upper left")
+        ax_policy.plot(hours, smooth(series("action_std")), color="tab:blue", label="action std (mean over actions)")
+        ax_policy.plot(hours, smooth(series("loss/value_explained_variance")), color="tab:purple",
+                       label="critic: explained variance of the rollout's returns")
+        ax_policy.set_ylabel("std / explained variance")
+        ax_policy.legend(fontsize=8, loc="upper left")
     axes[-1].set_xlabel("training wall-clock [h]")
     for ax in axes:
         ax.grid(alpha=0.3)

@@ -47,6 +47,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self.schedule_cfg = ScheduleConfig.from_dict(train_cfg.get("schedule", {}))
         self.curriculum = GoalCurriculumConfig(**train_cfg.get("curriculum", {}))
         self.critic_warmup_iterations = train_cfg.get("critic_warmup_iterations", 0)
+        self.critic_warmup_learning_rate = train_cfg.get("critic_warmup_learning_rate")
+        self.learning_rate = train_cfg["algorithm"].get("learning_rate", self.alg.learning_rate)  # after the warm-up
         self.imitation_weight = tuple(train_cfg.get("imitation_weight", (0.0, 0.0)))
         if max(self.imitation_weight) > 0:  # the environment labels its observations (ExpertLabelledEnv)
             self.alg.symmetry = ExpertImitationLoss()
@@ -74,9 +76,18 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             # Critic warm-up: without gradients the actor (and its std) stays as it is, its KL is 0, and the
             # adaptive learning rate is left unchanged.
             self.alg.actor.requires_grad_(it >= self.critic_warmup_iterations)
+            if self.critic_warmup_learning_rate is not None and it <= self.critic_warmup_iterations:
+                self.set_learning_rate(self.critic_warmup_learning_rate if it < self.critic_warmup_iterations
+                                       else self.learning_rate)
 
         self.alg.on_rollout_start = on_rollout_start
         super().learn(num_learning_iterations, init_at_random_ep_len)
+
+    def set_learning_rate(self, learning_rate: float) -> None:
+        """Sets PPO's learning rate (which the adaptive schedule starts from) and the optimizer's."""
+        self.alg.learning_rate = learning_rate
+        for group in self.alg.optimizer.param_groups:
+            group["lr"] = learning_rate
 
     def apply_schedules(self, iteration: int, total_iterations: int) -> None:
         """Set ``p_max``, the reach-reward weight, the imitation weight and the disturbance scale for ``iteration``

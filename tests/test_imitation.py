@@ -105,19 +105,29 @@ def test_critic_warmup_holds_the_actor_and_trains_the_critic(tmp_path, monkeypat
     original = CaTPPO.update
 
     def update(self):
+        learning_rates.append([group["lr"] for group in self.optimizer.param_groups])
         result = original(self)
         snapshots.append(([p.detach().clone() for p in self.actor.parameters()],
                           [p.detach().clone() for p in self.critic.parameters()]))
         return result
 
     monkeypatch.setattr(CaTPPO, "update", update)
-    runner = train(tiny(iterations=3, warmup=2), tmp_path / "run")
+    learning_rates = []
+    cfg = apply_overrides(tiny(iterations=3, warmup=2), ["ppo.schedule=fixed", "ppo.learning_rate=0.0002"])
+    runner = train(cfg, tmp_path / "run")
     assert len(snapshots) == 3
     first, second, third = snapshots
     assert all(torch.equal(a, b) for a, b in zip(first[0], second[0]))  # the actor is held in iterations 0 and 1
     assert not all(torch.equal(a, b) for a, b in zip(first[1], second[1]))  # while the critic learns
     assert not all(torch.equal(a, b) for a, b in zip(second[0], third[0]))  # iteration 2 trains the actor
     assert all(p.requires_grad for p in runner.alg.actor.parameters())
+    assert learning_rates == [[2e-4]] * 3
+
+    learning_rates.clear()  # a warm-up learning rate of its own, the run's from the first actor update
+    train(apply_overrides(cfg, ["critic_warmup_learning_rate=0.003"]), tmp_path / "run_lr")
+    assert learning_rates == [[3e-3], [3e-3], [2e-4]]
+    with pytest.raises(ConfigError, match=r"critic_warmup_learning_rate must be None or in \(0, 0.01\]"):
+        apply_overrides(cfg, ["critic_warmup_learning_rate=0.5"]).validate()
 
 
 

@@ -16,6 +16,8 @@
   they touch (:class:`ContactMotionObserver`), which tell a smooth push from a shaking one, and the base's
   commanded and achieved forward speed, which tell whether the base keeps its speed against the object,
   also per bin of the force that slides the object (``base_speed_by_sliding_force``).
+- ``rewards``: the discounted return-to-go the policy collects (training's gamma) and the mean reward terms,
+  beside its success: whether what PPO maximises and what the tables count agree (:class:`RewardObserver`).
 
 The environment is the one the policy was trained in: its config comes from the ``training_config``
 of the policy's ONNX metadata, changed only by ``--num-envs``, ``--noise/--no-noise`` and ``--set
@@ -348,6 +350,41 @@ class ContactMotionObserver:
         return rows
 
 
+class RewardObserver:
+    """The reward of every first-episode step (the environment's weighted sum r1..r4 and each raw term).
+
+    ``rewards``: what training maximises, so that a policy's returns can be set beside its success: the mean
+    over the episodes' steps of the discounted return-to-go ``G_t = sum_k gamma^k r_{t+k}`` (within the episode;
+    an episode's last steps sum fewer rewards, as for every policy) and the mean per step of each term."""
+
+    def __init__(self, env: PushEnv, count: int):
+        self.env = env
+        self.recorded = np.arange(env.num_envs) < count  # the first ``count`` worlds
+        self.steps: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (in_episode, reward, terms) per step
+
+    def observe(self, step: int, in_episode: torch.Tensor, continuing: torch.Tensor) -> None:
+        self.steps.append((in_episode.cpu().numpy() & self.recorded, self.env.reward_t.cpu().numpy().copy(),
+                           self.env.reward_terms_t.cpu().numpy().copy()))
+
+    def returns_to_go(self, gamma: float) -> np.ndarray:
+        """``G_t`` of every step of every first episode, pooled [steps]."""
+        going, following = [], np.zeros(self.env.num_envs)
+        for in_episode, reward, _ in reversed(self.steps):  # a step outside the episode contributes and passes on 0
+            following = np.where(in_episode, reward + gamma * following, 0.0)
+            going.append(following[in_episode])
+        return np.concatenate(going)
+
+    @staticmethod
+    def summary(observers: list[RewardObserver], gamma: float) -> dict:
+        """The ``rewards`` entry of ``eval.json`` from the observers of all rounds: statistics of ``G_t``, the mean
+        per step of each raw term (before its weight) and the weights, pooled over the episodes' steps."""
+        env = observers[0].env
+        terms = np.concatenate([terms[in_episode] for o in observers for in_episode, _, terms in o.steps])
+        return {"gamma": gamma, "return_to_go": _stats(np.concatenate([o.returns_to_go(gamma) for o in observers])),
+                "term_means_per_step": {name: float(v) for name, v in zip(env.reward_names, terms.mean(axis=0))},
+                "weights": {name: float(w) for name, w in zip(env.reward_names, env.task.reward_weights.numpy())}}
+
+
 def _percent(mask: np.ndarray) -> float | None:
     """Percentage of True entries; None (JSON null) for no entries."""
     return 100.0 * float(mask.mean()) if mask.size else None
@@ -393,14 +430,15 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
     env_cfg = env_config_for(policy, cfg.worlds, cfg.noise, cfg.device, cfg.seed, cfg.overrides)
     env = make_push_env(env_cfg)
     rounds = math.ceil(cfg.episodes / cfg.worlds)
-    parts, violated, motions = [], [], []
+    parts, violated, motions, rewards = [], [], [], []
     start = time.perf_counter()
     world_steps = rounds * cfg.worlds * env.max_episode_length
     with tqdm(total=world_steps, desc="eval", unit="world-step", unit_scale=True) as bar:
         for k in range(rounds):
             constraints = ConstraintObserver(env)
             motions.append(ContactMotionObserver(env, env_cfg.control_dt, cfg.episodes - k * cfg.worlds))
-            parts.append(run_first_episodes(env, policy, [constraints, motions[-1]], bar))
+            rewards.append(RewardObserver(env, cfg.episodes - k * cfg.worlds))
+            parts.append(run_first_episodes(env, policy, [constraints, motions[-1], rewards[-1]], bar))
             violated.append(constraints.violated.cpu().numpy())
     elapsed = time.perf_counter() - start
     episodes = FirstEpisodes.concatenate(parts, cfg.episodes)
@@ -416,6 +454,9 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
                           "toppled_rate": _percent(episodes.toppled[mask]),
                           "time_to_success_s": _stats(episodes.first_success_step[mask & episodes.success] * dt)}
     paper_name, paper_success, paper_toppled = paper_table_i_row(policy.contract.training_config)
+    from .train import TrainConfig
+
+    gamma = TrainConfig.from_dict(policy.contract.training_config).ppo.gamma  # the discount it was trained with
     result = {
         "policy": str(policy_path),
         "episodes": cfg.episodes,
@@ -431,6 +472,7 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
             ("object_sliding_force_n", "object_sliding_force"))}
         | {"base_speed_by_sliding_force": ContactMotionObserver.base_speed_by_sliding_force(motions)},
         "by_shape": by_shape,
+        "rewards": RewardObserver.summary(rewards, gamma),
         "paper": {"table_I_row": paper_name, "success_rate": paper_success, "toppled_rate": paper_toppled,
                   "constraint_violation_percent": PAPER_TABLE_II},
         "runtime": {"seconds": elapsed, "world_steps": world_steps, "rounds": rounds, "worlds": cfg.worlds,

@@ -54,7 +54,34 @@ def test_eval_writes_tables_json_and_png(policy, tmp_path):
     bins = saved["while_touching"]["base_speed_by_sliding_force"]
     assert sum(row["count"] for row in bins) == saved["while_touching"]["base_forward_speed_m_s"]["count"]
     assert saved["config"]["env"]["randomize_first_episode_length"] is False
+    assert saved["rewards"]["gamma"] == 0.99
+    assert saved["rewards"]["return_to_go"]["count"] == round(12 * saved["episode_length_s"]["mean"] / 0.02)
+    assert set(saved["rewards"]["term_means_per_step"]) == set(saved["rewards"]["weights"]) == {
+        "task", "reach", "object_velocity", "action_rate"}
     assert is_png(tmp_path / "eval.png")
+
+
+def test_returns_to_go_of_hand_made_episodes():
+    from types import SimpleNamespace
+
+    from dynpush.policies.evaluate import RewardObserver
+
+    gamma, rewards = 0.5, [[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]]
+    in_episode = [[True, True], [True, False], [True, False]]  # world 1's first episode ends after step 0
+    env = SimpleNamespace(num_envs=3, reward_names=("task", "reach"),
+                          task=SimpleNamespace(reward_weights=SimpleNamespace(numpy=lambda: np.array([2.0, 1.0]))))
+    observers = [RewardObserver(env, count=2)]  # world 2 is beyond the episodes asked for
+    for step, (reward, inside) in enumerate(zip(rewards, in_episode)):
+        env.reward_t = torch.tensor(reward + [100.0])
+        env.reward_terms_t = torch.tensor([[r, 10.0 * r] for r in reward + [100.0]])
+        observers[0].observe(step, torch.tensor(inside + [True]), None)
+    world_0 = [1 + 0.5 * 3 + 0.25 * 5, 3 + 0.5 * 5, 5.0]
+    assert sorted(observers[0].returns_to_go(gamma)) == pytest.approx(sorted(world_0 + [2.0]))
+    summary = RewardObserver.summary(observers, gamma)
+    assert summary["return_to_go"]["count"] == 4 and summary["return_to_go"]["mean"] == pytest.approx(
+        (sum(world_0) + 2.0) / 4)
+    assert summary["term_means_per_step"] == pytest.approx({"task": 11.0 / 4, "reach": 110.0 / 4})
+    assert summary["weights"] == {"task": 2.0, "reach": 1.0}
 
 
 def test_contact_motion_of_hand_made_trajectories(small_env):

@@ -355,7 +355,8 @@ class RewardObserver:
 
     ``rewards``: what training maximises, so that a policy's returns can be set beside its success: the mean
     over the episodes' steps of the discounted return-to-go ``G_t = sum_k gamma^k r_{t+k}`` (within the episode;
-    an episode's last steps sum fewer rewards, as for every policy) and the mean per step of each term."""
+    an episode's last steps sum fewer rewards, as for every policy) and the mean per step of each term. The weights
+    are the evaluated environment's (its config's: training divides the reach weight by 4 after its first 7.5 %)."""
 
     def __init__(self, env: PushEnv, count: int):
         self.env = env

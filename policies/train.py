@@ -82,9 +82,9 @@ class TrainConfig:
     # Iterations at the start of the run in which only the critic learns and the actor is held (ours): for
     # runs that start from a ``dynpush imitate`` checkpoint, whose critic has not learnt the returns yet.
     critic_warmup_iterations: int = 0
-    # Learning rate of those warm-up iterations (ours; None: ppo.learning_rate). A critic that starts from values near 0
-    # needs returns of ~200 (1000-step episodes, gamma 0.99): at 1e-4 it explained 7-14 % of their variance after 30
-    # iterations. The run's ppo.learning_rate takes over with the actor.
+    # Learning rate of those warm-up iterations (ours; None: ppo.learning_rate); the run's takes over with the actor.
+    # From bc9 at 1e-4 the critic explained 7-14 % of the variance of the returns after 30 iterations, at 1e-3 52-64 %
+    # after 40-74 (README, "Where the fine-tunings lose it").
     critic_warmup_learning_rate: float | None = None
     # Weight of the scripted pusher's imitation term in PPO's loss, (first, last iteration), linear in between
     # (ours, policies/expert_regularization.py); (0, 0) is plain CaT-PPO.

@@ -138,16 +138,17 @@ def wall_clock_hours(records: list[dict]) -> np.ndarray:
 
 
 def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float | None = None,
-                        marked_iteration: int | None = None) -> dict:
+                        marked_iteration: int | None = None, imitation_run: Path | None = None) -> dict:
     """Success, topple and reward curves of a run against training wall-clock hours; writes the PNG ``out``.
 
     Episode rates are of the episodes that ended in each iteration (smoothed over ``SMOOTHING`` iterations).
     ``marked_iteration``: a vertical line where a checkpoint of that many iterations was saved (the shipped
-    one). Returns the final smoothed figures.
+    one). ``imitation_run``: the run whose DAgger rounds come first (the one a ``--init-from`` run started from;
+    default ``run_dir``'s own). Returns the final smoothed figures.
     """
     from matplotlib.figure import Figure
 
-    records, rounds = training_records(run_dir), imitation_rounds(run_dir)
+    records, rounds = training_records(run_dir), imitation_rounds(imitation_run or run_dir)
     if not records and not rounds:
         raise ValueError(f"{run_dir}/progress.jsonl has no iterations yet")
     round_hours = np.cumsum([r["seconds"] for r in rounds]) / 3600.0
@@ -184,7 +185,8 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
                      label="DAgger round: toppled")
     ax_rate.set_ylabel("% of ended episodes")
     ax_rate.set_ylim(-2, 102)
-    ax_rate.legend(fontsize=8, loc="upper left")
+    if ax_rate.get_legend_handles_labels()[0]:  # runs too short to end an episode have none
+        ax_rate.legend(fontsize=8, loc="upper left")
     if records:
         ax_reward, ax_delta, ax_policy = axes[1:]
         for key in dict.fromkeys(k for r in records for k in r if k.startswith("/reward/")):
@@ -214,7 +216,8 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     if imitation_hours > 0.0:
         ax_rate.text(0.5 * imitation_hours, 50.0, "DAgger from the\nscripted pusher", ha="center", va="center", fontsize=8)
     total_hours = float(hours[-1]) if records else imitation_hours
-    fig.suptitle(f"{Path(run_dir).name}: {len(rounds)} DAgger rounds, {len(records)} CaT-PPO iterations in {total_hours:.2f} h"
+    source = f" ({Path(imitation_run).name})" if imitation_run else ""
+    fig.suptitle(f"{Path(run_dir).name}: {len(rounds)} DAgger rounds{source}, {len(records)} CaT-PPO iterations in {total_hours:.2f} h"
                  f" (iterations smoothed over {SMOOTHING})")
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)

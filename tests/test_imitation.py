@@ -213,6 +213,13 @@ def test_a_new_run_starts_from_another_runs_imitation_actor_with_its_own_optimiz
     assert record["commands"] == [*upstream["commands"], launch["command"]]
     assert record["world_steps"] == 2 * 6 * 8 + 8 * 40  # two iterations of 6 steps in 8 worlds + one DAgger round
 
+    from dynpush.policies.progress import plot_learning_curve
+
+    alone = plot_learning_curve(tmp_path / "fine", tmp_path / "alone.png")
+    both = plot_learning_curve(tmp_path / "fine", tmp_path / "both.png", imitation_run=tmp_path / "bc")
+    assert both["iterations"] == alone["iterations"] == 2  # the shipped curve starts with the upstream DAgger rounds
+    assert both["hours"] == pytest.approx(alone["hours"] + upstream["imitation"]["wall_clock_h"])
+
 
 def test_cli_passes_the_expert_object_size(tmp_path, monkeypatch):
     from dynpush import cli

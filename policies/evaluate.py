@@ -455,9 +455,7 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
                           "toppled_rate": _percent(episodes.toppled[mask]),
                           "time_to_success_s": _stats(episodes.first_success_step[mask & episodes.success] * dt)}
     paper_name, paper_success, paper_toppled = paper_table_i_row(policy.contract.training_config)
-    from .train import TrainConfig
-
-    gamma = TrainConfig.from_dict(policy.contract.training_config).ppo.gamma  # the discount it was trained with
+    gamma = policy.contract.training_config["ppo"]["gamma"]  # the discount it was trained with
     result = {
         "policy": str(policy_path),
         "episodes": cfg.episodes,

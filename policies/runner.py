@@ -48,7 +48,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self.curriculum = GoalCurriculumConfig(**train_cfg.get("curriculum", {}))
         self.critic_warmup_iterations = train_cfg.get("critic_warmup_iterations", 0)
         self.critic_warmup_learning_rate = train_cfg.get("critic_warmup_learning_rate")
-        self.learning_rate = train_cfg["algorithm"].get("learning_rate", self.alg.learning_rate)  # after the warm-up
+        self.learning_rate = self.alg.learning_rate  # the configured one, restored after the warm-up
         self.imitation_weight = tuple(train_cfg.get("imitation_weight", (0.0, 0.0)))
         if max(self.imitation_weight) > 0:  # the environment labels its observations (ExpertLabelledEnv)
             self.alg.symmetry = ExpertImitationLoss()

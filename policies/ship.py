@@ -70,7 +70,7 @@ def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: 
     out_dir.mkdir(parents=True, exist_ok=True)
     policy_path = export_policy(run_dir, checkpoint_path.name, out_dir / "policy.onnx")
     result = evaluate(policy_path, EvalConfig(episodes=episodes, seed=seed), out_dir)
-    source = read_launches(run_dir)[0].get("init_from")  # a run started with --init-from: its DAgger rounds come first
+    source = record["launches"][0].get("init_from")  # a run started with --init-from: its DAgger rounds come first
     plot_learning_curve(run_dir, out_dir / "learning_curve.png", result["paper"]["success_rate"], record["iterations"],
                         imitation_run=Path(source).parent if source else None)
     shutil.copyfile(run_dir / "config.json", out_dir / "training_config.json")

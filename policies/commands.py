@@ -134,16 +134,24 @@ def _curve(args: argparse.Namespace) -> int:
 
 
 def _ship(args: argparse.Namespace) -> int:
-    from dynpush.shipped import SHIPPED_DIR
+    from dynpush.shipped import LOCOMOTION_DIR, SHIPPED_DIR
 
+    from .export import load_run_config
+    from .locomotion_train import LocomotionTrainConfig
     from .ship import ship
 
-    out = Path(args.to) if args.to else SHIPPED_DIR
-    record = ship(Path(args.run), out, args.checkpoint, args.episodes, args.seed)
+    locomotion = isinstance(load_run_config(Path(args.run)), LocomotionTrainConfig)
+    out = Path(args.to) if args.to else LOCOMOTION_DIR if locomotion else SHIPPED_DIR
+    record = ship(Path(args.run), out, args.checkpoint, args.episodes, args.seed, args.worlds)
     evaluation = record["evaluation"]
-    print(f"shipped {record['run']}/{record['checkpoint']} ({record['iterations']} iterations,"
-          f" {record['training_wall_clock_h']:.2f} h): success {evaluation['success_percent']:.2f} %,"
-          f" toppled {evaluation['toppled_percent']:.2f} % over {evaluation['episodes']} episodes; wrote {out}")
+    trained = f"shipped {record['run']}/{record['checkpoint']} ({record['iterations']} iterations, {record['training_wall_clock_h']:.2f} h)"
+    if locomotion:
+        print(f"{trained}: tracking RMS " + ", ".join(f"{name} {value:.3f} {evaluation['units'][name]}"
+                                                    for name, value in evaluation["tracking_rms"].items())
+              + f", fell {evaluation['fell_percent']:.1f} % of {evaluation['worlds']} worlds; wrote {out}")
+    else:
+        print(f"{trained}: success {evaluation['success_percent']:.2f} %, toppled {evaluation['toppled_percent']:.2f} %"
+              f" over {evaluation['episodes']} episodes; wrote {out}")
     return 0
 
 
@@ -197,6 +205,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("run", help="run folder (runs/NAME)")
     p.add_argument("--checkpoint", default=None, help="checkpoint file in the run folder (default: the latest model_K.pt)")
     p.add_argument("--episodes", type=int, default=4096, help="evaluation episodes (paper: 4096)")
+    p.add_argument("--worlds", type=int, default=256, help="a locomotion run: worlds of its tracking evaluation")
     p.add_argument("--seed", type=int, default=0, help="evaluation seed")
     p.add_argument("--to", default=None, help="output folder (default: the installed package's dynpush/shipped)")
     p.set_defaults(func=_ship)

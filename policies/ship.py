@@ -6,7 +6,8 @@ episodes by default, paper IV-A), the learning curve is drawn from ``progress.js
 ``training.json`` records the training command(s) from ``launches.jsonl``, the seed, the commit, the
 checkpoint, the training wall-clock and world-steps (the DAgger rounds of a run started by ``dynpush
 imitate`` included, and also listed on their own; a run started with ``--init-from`` counts the run it
-started from), and the evaluation summary.
+started from), and the evaluation summary. A locomotion run (``dynpush train --task locomotion``) ships the same
+way into ``dynpush/shipped/locomotion/``: ``locomotion.onnx``, its tracking evaluation and its provenance.
 """
 
 from __future__ import annotations
@@ -19,6 +20,9 @@ import torch
 
 from .evaluate import EvalConfig, evaluate
 from .export import OnnxPolicy, export_policy, load_run_config, resolve_checkpoint
+from .locomotion_eval import LocomotionEvalConfig, evaluate_locomotion
+from .locomotion_export import export_locomotion
+from .locomotion_train import LocomotionTrainConfig
 from .progress import imitation_summary, plot_learning_curve, training_records, wall_clock_hours
 
 
@@ -62,24 +66,47 @@ def provenance(run_dir: Path, checkpoint_path: Path) -> dict:
     return record
 
 
-def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: int = 4096, seed: int = 0) -> dict:
-    """Writes the shipped files of ``run_dir``'s checkpoint (default: the latest) into ``out_dir``; returns training.json."""
+def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: int = 4096, seed: int = 0,
+         locomotion_worlds: int = 256) -> dict:
+    """Writes the shipped files of ``run_dir``'s checkpoint (default: the latest) into ``out_dir``; returns training.json.
+
+    A push run's files are ``policy.onnx`` and its ``dynpush eval`` of ``episodes`` episodes; a locomotion run's
+    ``locomotion.onnx`` and its tracking evaluation on ``locomotion_worlds`` worlds (``dynpush eval
+    locomotion.onnx``, locomotion_eval.json / .png)."""
     run_dir = Path(run_dir)
     checkpoint_path = resolve_checkpoint(run_dir, checkpoint)
     record = provenance(run_dir, checkpoint_path)
     out_dir.mkdir(parents=True, exist_ok=True)
-    policy_path = export_policy(run_dir, checkpoint_path.name, out_dir / "policy.onnx")
-    result = evaluate(policy_path, EvalConfig(episodes=episodes, seed=seed), out_dir)
-    source = record["launches"][0].get("init_from")  # a run started with --init-from: its DAgger rounds come first
-    plot_learning_curve(run_dir, out_dir / "learning_curve.png", result["paper"]["success_rate"], record["iterations"],
+    if isinstance(load_run_config(run_dir), LocomotionTrainConfig):
+        record["evaluation"] = _ship_locomotion(run_dir, checkpoint_path, out_dir, locomotion_worlds, seed)
+        paper_success, source = None, None
+    else:
+        record |= _ship_push(run_dir, checkpoint_path, out_dir, episodes, seed)
+        paper_success = record["evaluation"]["paper"]["success_rate"]
+        source = record["launches"][0].get("init_from")  # a run started with --init-from: its DAgger rounds come first
+    plot_learning_curve(run_dir, out_dir / "learning_curve.png", paper_success, record["iterations"],
                         imitation_run=Path(source).parent if source else None)
     shutil.copyfile(run_dir / "config.json", out_dir / "training_config.json")
-    record |= {
+    (out_dir / "training.json").write_text(json.dumps(record, indent=2))
+    return record
+
+
+def _ship_push(run_dir: Path, checkpoint_path: Path, out_dir: Path, episodes: int, seed: int) -> dict:
+    """policy.onnx and eval.json / eval.png; the training.json entries they add."""
+    policy_path = export_policy(run_dir, checkpoint_path.name, out_dir / "policy.onnx")
+    result = evaluate(policy_path, EvalConfig(episodes=episodes, seed=seed), out_dir)
+    return {
         "training_config_sha256": OnnxPolicy(policy_path).contract.training_config_sha256,
         "evaluation": {"episodes": result["episodes"], "success_percent": result["success_rate"],
                        "toppled_percent": result["toppled_rate"],
                        "constraint_violation_percent": result["constraint_violation_percent"],
                        "paper": result["paper"]},
     }
-    (out_dir / "training.json").write_text(json.dumps(record, indent=2))
-    return record
+
+
+def _ship_locomotion(run_dir: Path, checkpoint_path: Path, out_dir: Path, worlds: int, seed: int) -> dict:
+    """locomotion.onnx and locomotion_eval.json / .png; the training.json evaluation entry."""
+    policy_path = export_locomotion(run_dir, checkpoint_path.name, out_dir / "locomotion.onnx")
+    result = evaluate_locomotion(policy_path, LocomotionEvalConfig(num_envs=worlds, seed=seed), out_dir)
+    return {key: result[key] for key in ("worlds", "seconds_per_command", "fell_percent", "tracking_rms", "units",
+                                         "violated_percent_of_steps")}

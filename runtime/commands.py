@@ -54,21 +54,28 @@ def _replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _locomotion_policy(args: argparse.Namespace) -> str | None:
+    """The locomotion ONNX the runtime runs: None with ``--locomotion onboard``; ``--locomotion-policy``, else the
+    shipped one (``dynpush/shipped/locomotion``)."""
+    from dynpush.shipped import shipped_file
+
+    if args.locomotion == "onboard":
+        return None
+    return args.locomotion_policy or str(shipped_file("locomotion/locomotion.onnx"))
+
+
 def _sim2sim(args: argparse.Namespace) -> int:
     from .config import RuntimeConfigError
     from .errors import StartupError
     from .sim2sim import SimToSimOptions, run_sim2sim
 
-    options = SimToSimOptions(policy=args.policy, episodes=args.episodes, mocap_noise_m=args.mocap_noise,
-                              mocap_noise_rad=args.mocap_noise_rad, latency_s=args.latency, drop=args.drop,
-                              lockstep=args.lockstep, seed=args.seed, config=args.config, overrides=args.set or [],
-                              log_dir=args.log_dir, trajectory_png=args.png,
-                              locomotion_policy=args.locomotion_policy if args.locomotion == "onnx" else None)
-    if args.locomotion == "onnx" and not args.locomotion_policy:
-        return _fail(RuntimeConfigError("--locomotion onnx needs --locomotion-policy PATH (locomotion.onnx of dynpush export)"))
     try:
+        options = SimToSimOptions(policy=args.policy, episodes=args.episodes, mocap_noise_m=args.mocap_noise,
+                                  mocap_noise_rad=args.mocap_noise_rad, latency_s=args.latency, drop=args.drop,
+                                  lockstep=args.lockstep, seed=args.seed, config=args.config, overrides=args.set or [],
+                                  log_dir=args.log_dir, trajectory_png=args.png, locomotion_policy=_locomotion_policy(args))
         report = run_sim2sim(options)
-    except (RuntimeConfigError, StartupError) as error:
+    except (RuntimeConfigError, StartupError, FileNotFoundError) as error:
         return _fail(error)
     text = json.dumps(report, indent=1)
     if args.out:
@@ -87,15 +94,17 @@ def _demo(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     record = training_record()
-    options = SimToSimOptions(policy=str(shipped_file("policy.onnx")), episodes=args.episodes, lockstep=args.lockstep,
-                              seed=args.seed, overrides=args.set or [], log_dir=str(out),
-                              trajectory_png=str(out / "demo.png"))
-    print(f"dynpush demo: the shipped policy ({record['run']}, {record['iterations']} iterations) through the deployment"
-          f" runtime against the simulator, {args.episodes} episodes"
-          f" ({'lock-step' if args.lockstep else 'real time, 50 Hz'})", file=sys.stderr)
     try:
+        options = SimToSimOptions(policy=str(shipped_file("policy.onnx")), episodes=args.episodes, lockstep=args.lockstep,
+                                  seed=args.seed, overrides=args.set or [], log_dir=str(out),
+                                  trajectory_png=str(out / "demo.png"), locomotion_policy=_locomotion_policy(args))
+        legs = (f"legged robot, locomotion {options.locomotion_policy} in the runtime" if options.locomotion_policy
+                else "tracked base")
+        print(f"dynpush demo: the shipped policy ({record['run']}, {record['iterations']} iterations) through the"
+              f" deployment runtime against the simulator ({legs}), {args.episodes} episodes"
+              f" ({'lock-step' if args.lockstep else 'real time, 50 Hz'})", file=sys.stderr)
         report = run_sim2sim(options)
-    except (RuntimeConfigError, StartupError) as error:
+    except (RuntimeConfigError, StartupError, FileNotFoundError) as error:
         return _fail(error)
     (out / "demo.json").write_text(json.dumps(report, indent=1))
     for episode in report["episode_results"]:
@@ -106,10 +115,18 @@ def _demo(args: argparse.Namespace) -> int:
     evaluation = record["evaluation"]
     rate = report["success_rate"]
     print(f"success {100.0 * rate:.0f} % of {report['episodes']} episodes" if rate is not None else "no episode completed")
-    print(f"(shipped evaluation: {evaluation['success_percent']:.2f} % of {evaluation['episodes']} episodes;"
+    print(f"(shipped evaluation, tracked base: {evaluation['success_percent']:.2f} % of {evaluation['episodes']} episodes;"
           f" paper {evaluation['paper']['success_rate']} %)")
     print(f"wrote {out / 'demo.png'} and {out / 'demo.json'}")
     return 0 if report["completed"] else 1
+
+
+def _locomotion_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--locomotion", choices=("onboard", "onnx"), default="onboard",
+                   help="onboard: the simulator's tracked base takes the 6D command; onnx: the runtime runs"
+                        " --locomotion-policy and sends 17 joint targets to a legged simulated robot")
+    p.add_argument("--locomotion-policy", default=None, metavar="ONNX",
+                   help="locomotion.onnx (dynpush export of a locomotion run; default: the shipped one)")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -138,10 +155,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--log-dir", default="runs/sim2sim", help="folder of the runtime's tick log")
     p.add_argument("--out", default=None, help="also write the report to this JSON file")
     p.add_argument("--png", default=None, help="top-down picture of the episodes' paths (as dynpush play draws them)")
-    p.add_argument("--locomotion", choices=("onboard", "onnx"), default="onboard",
-                   help="onboard: the simulator's tracked base takes the 6D command; onnx: the runtime runs"
-                        " --locomotion-policy and sends 17 joint targets to a legged simulated robot")
-    p.add_argument("--locomotion-policy", default=None, metavar="ONNX", help="locomotion.onnx (dynpush export of a locomotion run)")
+    _locomotion_arguments(p)
     p.set_defaults(func=_sim2sim)
 
     p = subparsers.add_parser("demo", help="the shipped policy through the runtime against the simulator (offline)")
@@ -150,4 +164,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--set", nargs="*", metavar="env.FIELD=VALUE", help="simulator overrides, e.g. env.episode_length_s=10.0")
     p.add_argument("--out", default="runs/demo", help="folder of demo.png, demo.json and the runtime's tick log")
+    _locomotion_arguments(p)
     p.set_defaults(func=_demo)

@@ -15,7 +15,6 @@ from dynpush.kernels import locomotion as loco
 from dynpush.policies.export import load_actor, load_run_config
 from dynpush.policies.locomotion_export import export_locomotion
 from dynpush.policies.locomotion_train import LocomotionTrainConfig
-from dynpush.policies.train import train
 from dynpush.runtime.errors import StartupError
 from dynpush.runtime.locomotion import OnnxLocomotion, read_locomotion_contract
 from dynpush.runtime.frames import tilt_angle
@@ -42,14 +41,13 @@ def robot_contract():
 
 @pytest.fixture(scope="module")
 def locomotion_run(tmp_path_factory):
-    """Two CaT-PPO iterations on 16 legged worlds with small networks, exported to locomotion.onnx."""
-    run = tmp_path_factory.mktemp("locomotion") / "run"
-    cfg = LocomotionTrainConfig(env=LocomotionEnvConfig(num_envs=16), iterations=2, num_steps_per_env=8, save_interval=1,
-                                disturbance_ramp=(0, 2))
-    cfg.network = dataclasses.replace(cfg.network, actor_hidden=(32, 16), critic_hidden=(32, 16))
-    torch.manual_seed(0)
-    train(cfg, run)
-    return run, export_locomotion(run)
+    """Two CaT-PPO iterations on 16 legged worlds with small networks (``dynpush train --task locomotion``), exported
+    to locomotion.onnx."""
+    runs = tmp_path_factory.mktemp("locomotion")
+    assert main(["train", "--task", "locomotion", "--runs", str(runs), "--name", "run", "--set", "env.num_envs=16",
+                 "iterations=2", "num_steps_per_env=8", "save_interval=1", "disturbance_ramp=(0, 2)",
+                 "network.actor_hidden=(32, 16)", "network.critic_hidden=(32, 16)"]) == 0
+    return runs / "run", export_locomotion(runs / "run")
 
 
 def test_locomotion_onnx_equals_the_actor_and_carries_its_contract(locomotion_run, robot_contract):
@@ -233,6 +231,26 @@ def test_eval_of_a_locomotion_onnx_writes_tracking_errors_under_the_requested_di
     assert (tmp_path / "locomotion_eval.png").read_bytes()[:4] == b"\x89PNG"
     assert main(["eval", str(path), "--out", str(tmp_path), "--set", "ppo.learning_rate=0.1"]) == 2
     assert "a locomotion evaluation takes env.* overrides only, got 'ppo.learning_rate=0.1'" in capsys.readouterr().err
+
+
+def test_ship_of_a_locomotion_run_writes_its_onnx_tracking_evaluation_and_provenance(locomotion_run, tmp_path, capsys):
+    from dynpush.sim.legged_push_env import LocomotionNetwork
+
+    run, _ = locomotion_run
+    out = tmp_path / "locomotion"
+    assert main(["ship", str(run), "--to", str(out), "--worlds", "4"]) == 0
+    assert "shipped run/model_1.pt (2 iterations" in capsys.readouterr().out
+    assert sorted(p.name for p in out.iterdir()) == ["learning_curve.png", "locomotion.onnx", "locomotion_eval.json",
+                                                    "locomotion_eval.png", "training.json", "training_config.json"]
+    record, evaluation = (json.loads((out / name).read_text()) for name in ("training.json", "locomotion_eval.json"))
+    assert record["commands"] == [json.loads((run / "launches.jsonl").read_text())["command"]]
+    assert record["commands"][0].startswith("dynpush train --task locomotion")
+    assert record["iterations"] == 2 and record["world_steps"] == 2 * 8 * 16 and record["imitation"] is None
+    assert record["evaluation"]["tracking_rms"] == evaluation["tracking_rms"] and evaluation["worlds"] == 4
+    assert record["evaluation"]["fell_percent"] == evaluation["fell_percent"]
+    training_config = json.loads((out / "training_config.json").read_text())
+    assert LocomotionNetwork(str(out / "locomotion.onnx")).contract["training_config"] == training_config
+    assert training_config == json.loads((run / "config.json").read_text())
 
 
 def test_foot_contact_forces_carry_the_standing_robot():

@@ -10,6 +10,11 @@ beside it are written together by ``dynpush ship RUN`` (``dynpush.policies.ship`
 - ``eval.json`` / ``eval.png``: ``dynpush eval`` on the training distribution (paper Tables I/II);
 - ``learning_curve.png``: success and rewards against training wall-clock hours.
 
+``locomotion/`` holds the legged robot's locomotion policy the same way (``dynpush ship`` of a ``dynpush train
+--task locomotion`` run): ``locomotion.onnx``, ``locomotion_eval.json`` / ``.png`` (command tracking),
+``training.json``, ``training_config.json`` and ``learning_curve.png``. ``dynpush sim2sim --locomotion onnx`` and
+``dynpush demo --locomotion onnx`` run it when no other locomotion ONNX is given.
+
 Only the standard library here: the deployment runtime imports this module.
 """
 
@@ -19,10 +24,12 @@ import json
 from pathlib import Path
 
 SHIPPED_DIR = Path(__file__).resolve().parent
+LOCOMOTION_DIR = SHIPPED_DIR / "locomotion"
 
 
 def shipped_file(name: str) -> Path:
-    """The shipped file ``name`` (e.g. ``policy.onnx``); FileNotFoundError naming it when absent."""
+    """The shipped file ``name`` (e.g. ``policy.onnx``, ``locomotion/locomotion.onnx``); FileNotFoundError naming it
+    when absent."""
     path = SHIPPED_DIR / name
     if not path.is_file():
         raise FileNotFoundError(f"{path} is missing: this dynpush installation ships no {name}"
@@ -30,6 +37,6 @@ def shipped_file(name: str) -> Path:
     return path
 
 
-def training_record() -> dict:
-    """The contents of ``training.json``."""
-    return json.loads(shipped_file("training.json").read_text())
+def training_record(folder: str = "") -> dict:
+    """The contents of ``training.json`` (of the push policy; ``folder="locomotion"``: of the locomotion policy)."""
+    return json.loads(shipped_file(f"{folder}/training.json" if folder else "training.json").read_text())

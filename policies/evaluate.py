@@ -103,11 +103,13 @@ EE_CONTACT_COLUMN = critic_column("ee_object_contact")  # 54: 1 while the end-ef
 
 # ---------------------------------------------------------------------------------------------- environment
 def env_config_for(policy: OnnxPolicy, num_envs: int, noise: bool | None = None, device: str = "cpu",
-                   seed: int = 0, overrides: tuple[str, ...] | list[str] = ()) -> PushEnvConfig:
+                   seed: int = 0, overrides: tuple[str, ...] | list[str] = (), legs_from_outside: bool = False) -> PushEnvConfig:
     """The environment a policy was trained in (from its metadata), for evaluation.
 
     ``noise`` switches the actor observation noise (None keeps the training value); ``overrides`` are
     ``env.field=value`` strings applied last. Episodes start synchronized (no randomized first length).
+    Legged mode needs ``env.legged.locomotion_policy`` unless ``legs_from_outside`` (sim-to-sim: the runtime
+    runs the locomotion policy and sends the leg targets).
     """
     from .train import TrainConfig, apply_overrides
 
@@ -124,6 +126,9 @@ def env_config_for(policy: OnnxPolicy, num_envs: int, noise: bool | None = None,
         if not item.startswith("env."):
             raise ConfigError(f"evaluation overrides address the environment (env.field=value), got {item!r}")
     apply_overrides(cfg, list(overrides))
+    if cfg.env.legged.enabled and not cfg.env.legged.locomotion_policy and not legs_from_outside:
+        raise ConfigError("env.legged.locomotion_policy must name a locomotion.onnx in legged mode (without one the legs"
+                          " hold their default targets), e.g. the shipped dynpush/shipped/locomotion/locomotion.onnx")
     return cfg.env.validate()
 
 

@@ -120,7 +120,8 @@ class SimRobot:
         self.cfg = cfg
         policy = OnnxPolicy(cfg.policy)
         self.contract = policy.contract
-        self.env = make_push_env(env_config_for(policy, 1, noise=False, seed=cfg.seed, overrides=cfg.overrides))
+        self.env = make_push_env(env_config_for(policy, 1, noise=False, seed=cfg.seed, overrides=cfg.overrides,
+                                               legs_from_outside=True))
         check_contract_matches_env(self.contract, self.env)
         self.probe = EnvProbe(self.env)
         scene = self.env.scene

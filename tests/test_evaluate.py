@@ -282,5 +282,7 @@ def test_legged_evaluation_of_a_tracked_base_policy_uses_todays_legged_settings(
     (run / "config.json").write_text(json.dumps(saved))
     torch.save({"actor_state_dict": build_actor(cfg).state_dict()}, run / "model_0.pt")
     policy = OnnxPolicy(export_policy(run))
-    env_cfg = env_config_for(policy, num_envs=2, overrides=["env.legged.enabled=True"])
+    with pytest.raises(ConfigError, match="env.legged.locomotion_policy must name a locomotion.onnx in legged mode"):
+        env_config_for(policy, num_envs=2, overrides=["env.legged.enabled=True"])
+    env_cfg = env_config_for(policy, num_envs=2, overrides=["env.legged.enabled=True"], legs_from_outside=True)
     assert env_cfg.legged.enabled and env_cfg.legged.mujoco == LeggedModeConfig().mujoco

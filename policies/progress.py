@@ -217,7 +217,8 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
         ax_rate.text(0.5 * imitation_hours, 50.0, "DAgger from the\nscripted pusher", ha="center", va="center", fontsize=8)
     total_hours = float(hours[-1]) if records else imitation_hours
     source = f" ({Path(imitation_run).name})" if imitation_run else ""
-    fig.suptitle(f"{Path(run_dir).name}: {len(rounds)} DAgger rounds{source}, {len(records)} CaT-PPO iterations in {total_hours:.2f} h"
+    dagger = f"{len(rounds)} DAgger rounds{source}, " if rounds else ""
+    fig.suptitle(f"{Path(run_dir).name}: {dagger}{len(records)} CaT-PPO iterations in {total_hours:.2f} h"
                  f" (iterations smoothed over {SMOOTHING})")
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)

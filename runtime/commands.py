@@ -59,7 +59,12 @@ def _locomotion_policy(args: argparse.Namespace) -> str | None:
     shipped one (``dynpush/shipped/locomotion``)."""
     from dynpush.shipped import shipped_file
 
+    from .config import RuntimeConfigError
+
     if args.locomotion == "onboard":
+        if args.locomotion_policy:
+            raise RuntimeConfigError(f"--locomotion-policy {args.locomotion_policy} needs --locomotion onnx (the default,"
+                                     " onboard, leaves the 6D command to the simulator's tracked base)")
         return None
     return args.locomotion_policy or str(shipped_file("locomotion/locomotion.onnx"))
 

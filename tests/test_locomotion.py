@@ -192,7 +192,7 @@ def test_legged_push_training_env_state_round_trip(locomotion_run):
         cfg.validate()
 
 
-def test_sim2sim_with_the_runtime_running_the_locomotion_onnx(locomotion_run, robot_contract, tmp_path):
+def test_sim2sim_with_the_runtime_running_the_locomotion_onnx(locomotion_run, robot_contract, tmp_path, capsys):
     """``dynpush sim2sim --locomotion onnx``: the runtime runs both networks and sends 17 joint targets; the legged
     simulator applies the leg targets and reports its leg joints, which the next locomotion observation uses."""
     _, path = locomotion_run
@@ -205,6 +205,8 @@ def test_sim2sim_with_the_runtime_running_the_locomotion_onnx(locomotion_run, ro
           "--out", str(out)])
     report = json.loads(out.read_text())
     assert report["simulator_exit_code"] == 0 and report["conditions"]["locomotion"] == str(path)
+    assert main(["sim2sim", str(push), "--locomotion-policy", str(path)]) == 2  # the tracked base would ignore it
+    assert f"--locomotion-policy {path} needs --locomotion onnx" in capsys.readouterr().err
     log = read_log(report["runtime"]["log"])
     obs, targets = log.column("locomotion_obs"), log.column("leg_targets")
     assert len(obs) >= 20 and np.isfinite(obs).all() and np.isfinite(targets).all()

@@ -91,7 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true", help="continue the run from its latest checkpoint")
     p.add_argument("--init-from", default=None, metavar="CHECKPOINT",
                    help="start a new run from the actor and critic (with their normalisers) of another run's checkpoint,"
-                        " e.g. runs/bc/imitation.pt; optimizer, CaT state and iteration count start fresh")
+                        " e.g. runs/bc/imitation.pt, or from the actor of an exported policy.onnx (e.g. the shipped one;"
+                        " needs critic_warmup_iterations > 0); optimizer, CaT state and iteration count start fresh")
     p.add_argument("--procs", type=int, default=1,
                    help="processes on this machine (torchrun, gloo on CPU / NCCL on GPUs); env.num_envs is split")
     p.add_argument("--set", nargs="*", metavar="FIELD=VALUE", help="override config fields, e.g. env.num_envs=256 iterations=100")

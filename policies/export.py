@@ -102,6 +102,51 @@ def load_actor(checkpoint: Path, cfg: TrainConfig | LocomotionTrainConfig, obser
     return actor.eval()
 
 
+def load_onnx_actor(actor: MLPModel, path: Path) -> None:
+    """Copies the actor of an exported ``policy.onnx`` (its MLP weights and observation normaliser) into ``actor``,
+    the actor of a new run (``dynpush train --init-from policy.onnx``), so that training can go on from a shipped
+    or exported policy when the run's checkpoints are gone.
+
+    The graph is :func:`write_onnx`'s: ``(obs - mean) / (std + eps)``, then the MLP's ``Gemm`` layers in order.
+    The normaliser's std is the divisor less ``actor``'s own ``eps``. The file keeps no sample count: the
+    statistics count as the samples of the training run that wrote it (``iterations * num_envs *
+    num_steps_per_env`` of the ``training_config`` in its metadata), so that the new run's rollouts refine them
+    instead of replacing them. Raises ValueError naming the layer when the network sizes differ.
+    """
+    import torch
+    from onnx import numpy_helper
+
+    from dynpush.policies.train import TrainConfig
+
+    policy = OnnxPolicy(path)  # checks the contract and the input / output shapes
+    model = onnx.load(str(path))
+    weights = {tensor.name: numpy_helper.to_array(tensor) for tensor in model.graph.initializer}
+    nodes = {node.op_type: node for node in reversed(model.graph.node)}  # the first node of each type
+    mean, divisor = weights[nodes["Sub"].input[1]], weights[nodes["Div"].input[1]]
+    gemms = [node for node in model.graph.node if node.op_type == "Gemm"]
+    layers = [module for module in actor.mlp if isinstance(module, torch.nn.Linear)]
+    if len(gemms) != len(layers):
+        raise ValueError(f"{path} has {len(gemms)} layers, the run's actor {len(layers)}: set network.actor_hidden to the"
+                         f" hidden sizes of the file ({[int(weights[g.input[2]].shape[0]) for g in gemms[:-1]]})")
+    trained = TrainConfig.from_dict(policy.contract.training_config)
+    samples = trained.iterations * trained.env.num_envs * trained.num_steps_per_env
+    with torch.no_grad():
+        for index, (gemm, layer) in enumerate(zip(gemms, layers)):
+            transposed = any(a.name == "transB" and a.i == 1 for a in gemm.attribute)
+            weight = weights[gemm.input[1]] if transposed else weights[gemm.input[1]].T
+            if tuple(weight.shape) != tuple(layer.weight.shape):
+                raise ValueError(f"{path}: layer {index} is {list(weight.shape)} (out, in), the run's actor has"
+                                 f" {list(layer.weight.shape)}: set network.actor_hidden to the file's hidden sizes")
+            layer.weight.copy_(torch.tensor(weight))
+            layer.bias.copy_(torch.tensor(weights[gemm.input[2]]))
+        normalizer = actor.obs_normalizer
+        std = torch.tensor(divisor).reshape(normalizer._std.shape) - normalizer.eps
+        normalizer._mean.copy_(torch.tensor(mean).reshape(normalizer._mean.shape))
+        normalizer._std.copy_(std)
+        normalizer._var.copy_(std.square())
+        normalizer.count.fill_(samples)
+
+
 def build_contract(cfg: TrainConfig) -> PolicyContract:
     """The contract of a policy trained with ``cfg`` (a TrainConfig), with the robot read from ``robot.usda``."""
     import dataclasses

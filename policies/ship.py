@@ -58,12 +58,26 @@ def provenance(run_dir: Path, checkpoint_path: Path) -> dict:
     }
     source = launches[0].get("init_from")
     if source is not None:
-        upstream = provenance(Path(source).parent, Path(source))
+        upstream = onnx_provenance(Path(source)) if source.endswith(".onnx") else provenance(Path(source).parent, Path(source))
         record["initialised_from"] = upstream
         record["commands"] = upstream["commands"] + record["commands"]
         record["world_steps"] += upstream["world_steps"]
         record["training_wall_clock_h"] += upstream["training_wall_clock_h"]
     return record
+
+
+def onnx_provenance(policy_path: Path) -> dict:
+    """What trained an exported ``policy.onnx`` that a run started from: the ``training.json`` that ``dynpush ship``
+    wrote beside it when it belongs to that file (same training config hash), else a record that says the
+    file's history is unknown (no commands, world-steps or hours counted)."""
+    record_path = policy_path.parent / "training.json"
+    sha = OnnxPolicy(policy_path).contract.training_config_sha256
+    if record_path.exists():
+        record = json.loads(record_path.read_text())
+        if record.get("training_config_sha256") == sha:
+            return record
+    return {"run": None, "policy": str(policy_path), "training_config_sha256": sha, "history": "unknown",
+            "commands": [], "world_steps": 0, "training_wall_clock_h": 0.0}
 
 
 def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: int = 4096, seed: int = 0,

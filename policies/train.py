@@ -275,7 +275,9 @@ def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool 
     iterations in all (schedules that scale with the run length follow the new length). A new run with
     ``init_from`` (a checkpoint of another run with the same networks, e.g. its ``imitation.pt``) starts from
     that run's actor and critic with their normalisers; its optimizer (learning rate of ``cfg``), action noise
-    (``cfg.network.init_noise_std``), CaT state, iteration count and episodes are its own.
+    (``cfg.network.init_noise_std``), CaT state, iteration count and episodes are its own. ``init_from`` may also be
+    an exported push ``policy.onnx`` (e.g. the shipped one): the actor and its normaliser come from the file, the
+    critic starts fresh and learns during ``critic_warmup_iterations`` (required) while the actor is held.
 
     Under torchrun every process runs one shard of ``cfg.env.num_envs`` worlds; gradients and
     normaliser statistics are averaged across processes (rsl_rl), rank 0 logs and saves.
@@ -289,6 +291,12 @@ def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool 
         if extend_to is not None:
             cfg.iterations = extend_to
     cfg.validate()
+    if init_from is not None and init_from.suffix == ".onnx" and not isinstance(cfg, TrainConfig):
+        raise ConfigError(f"--init-from {init_from}: an ONNX file can start a push run only; a locomotion run starts"
+                          " from a checkpoint (model_K.pt)")
+    if init_from is not None and init_from.suffix == ".onnx" and not cfg.critic_warmup_iterations:
+        raise ConfigError(f"--init-from {init_from}: an ONNX file holds the actor only; set critic_warmup_iterations > 0"
+                          " (e.g. 60) so that the new critic learns the returns before the actor is trained")
     if group.rank == 0:
         run_dir.mkdir(parents=True, exist_ok=True)
         config_path.write_text(json.dumps(cfg.to_dict(), indent=2))
@@ -305,6 +313,11 @@ def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool 
         if checkpoint is None:
             raise FileNotFoundError(f"--resume: no model_*.pt in {run_dir}")
         runner.load(str(checkpoint), restore_env=group.world_size == 1)
+    elif init_from is not None and init_from.suffix == ".onnx":
+        from .export import load_onnx_actor
+
+        load_onnx_actor(runner.alg.actor, init_from)
+        set_action_std(runner.alg.actor, cfg.network.init_noise_std)
     elif init_from is not None:
         runner.load(str(init_from), load_cfg={"actor": True, "critic": True}, restore_env=False)
         set_action_std(runner.alg.actor, cfg.network.init_noise_std)

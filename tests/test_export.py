@@ -129,3 +129,57 @@ def test_the_same_file_runs_in_warp_nn(exported):
     for o in obs:
         actions = runtime({"obs": wp.array(o[None], dtype=wp.float32, device="cpu")})["actions"].numpy()
         assert np.abs(actions - torch_actions(actor, o[None])).max() < 1e-5
+
+
+def test_an_exported_actor_loads_back_into_a_new_actor(exported):
+    from dynpush.policies.export import build_actor, load_onnx_actor
+
+    run, path = exported
+    cfg = load_run_config(run)
+    source = load_actor(run / "model_0.pt", cfg)
+    actor = build_actor(cfg).eval()
+    load_onnx_actor(actor, path)
+    obs = observations(source, 32, seed=2)
+    np.testing.assert_allclose(torch_actions(actor, obs), torch_actions(source, obs), atol=1e-5)
+    np.testing.assert_allclose(actor.obs_normalizer._var.numpy(), source.obs_normalizer._var.numpy(), rtol=1e-4, atol=1e-6)
+    # no sample count in the file: the statistics count as the samples of the run that wrote it
+    assert int(actor.obs_normalizer.count) == cfg.iterations * cfg.env.num_envs * cfg.num_steps_per_env
+
+    wider = build_actor(apply_overrides(TrainConfig.preset_config("cpu"), ["network.actor_hidden=(64, 16)"]))
+    with pytest.raises(ValueError, match=r"actor_hidden"):
+        load_onnx_actor(wider, path)
+    deeper = build_actor(apply_overrides(TrainConfig.preset_config("cpu"), ["network.actor_hidden=(32, 16, 8)"]))
+    with pytest.raises(ValueError, match=r"has 3 layers, the run's actor 4.*\[32, 16\]"):
+        load_onnx_actor(deeper, path)
+
+
+def test_a_new_run_starts_from_an_exported_policy_and_ship_counts_its_history(exported, tmp_path, capsys):
+    from dynpush.policies.ship import onnx_provenance, provenance
+
+    run, path = exported
+    shipped = tmp_path / "shipped"
+    shipped.mkdir()
+    (shipped / "policy.onnx").write_bytes(path.read_bytes())
+    sha = OnnxPolicy(path).contract.training_config_sha256
+    (shipped / "training.json").write_text(json.dumps({"run": "upstream", "commands": ["dynpush train --name upstream"],
+                                                       "world_steps": 1000, "training_wall_clock_h": 0.5,
+                                                       "training_config_sha256": sha}))
+    fine = tmp_path / "fine"
+    overrides = ["env.num_envs=8", "iterations=1", "num_steps_per_env=6", "save_interval=1",
+                 "network.actor_hidden=(32, 16)", "network.critic_hidden=(16, 16)"]
+    assert main(["train", "--name", "fine", "--runs", str(tmp_path), "--init-from", str(shipped / "policy.onnx"),
+                 "--set", *overrides]) != 0
+    assert "holds the actor only; set critic_warmup_iterations > 0" in capsys.readouterr().err
+    assert not fine.exists()  # refused before anything was written
+    main(["train", "--name", "fine", "--runs", str(tmp_path), "--init-from", str(shipped / "policy.onnx"),
+          "--set", *overrides, "critic_warmup_iterations=1"])
+    source = load_actor(run / "model_0.pt", load_run_config(run))
+    tuned = load_actor(fine / "model_0.pt", load_run_config(fine))  # the actor was held in the warm-up iteration
+    for name, value in source.state_dict().items():
+        if name.startswith("mlp."):
+            torch.testing.assert_close(tuned.state_dict()[name], value, msg=name)
+    record = provenance(fine, fine / "model_0.pt")
+    assert record["initialised_from"]["run"] == "upstream"
+    assert record["commands"][0] == "dynpush train --name upstream" and record["world_steps"] == 1000 + 6 * 8
+    (shipped / "training.json").unlink()  # a file without its record: its history is unknown, nothing is counted
+    assert onnx_provenance(shipped / "policy.onnx")["history"] == "unknown"

@@ -30,6 +30,7 @@ import onnxruntime
 
 from dynpush.runtime.contract import INPUT_NAME, OUTPUT_NAME, ContractError, PolicyContract
 from dynpush.runtime.observation import NUM_ACTIONS, NUM_ARM_JOINTS, POLICY_OBSERVATION_SIZE
+from dynpush.sim.config import ConfigError
 
 if TYPE_CHECKING:  # torch and rsl_rl are imported where needed: loading and running a policy needs neither
     from rsl_rl.models import MLPModel
@@ -111,7 +112,7 @@ def load_onnx_actor(actor: MLPModel, path: Path) -> None:
     The normaliser's std is the divisor less ``actor``'s own ``eps``. The file keeps no sample count: the
     statistics count as the samples of the training run that wrote it (``iterations * num_envs *
     num_steps_per_env`` of the ``training_config`` in its metadata), so that the new run's rollouts refine them
-    instead of replacing them. Raises ValueError naming the layer when the network sizes differ.
+    instead of replacing them. Raises a ConfigError naming network.actor_hidden when the network sizes differ.
     """
     import torch
     from onnx import numpy_helper
@@ -126,7 +127,7 @@ def load_onnx_actor(actor: MLPModel, path: Path) -> None:
     gemms = [node for node in model.graph.node if node.op_type == "Gemm"]
     layers = [module for module in actor.mlp if isinstance(module, torch.nn.Linear)]
     if len(gemms) != len(layers):
-        raise ValueError(f"{path} has {len(gemms)} layers, the run's actor {len(layers)}: set network.actor_hidden to the"
+        raise ConfigError(f"{path} has {len(gemms)} layers, the run's actor {len(layers)}: set network.actor_hidden to the"
                          f" hidden sizes of the file ({[int(weights[g.input[2]].shape[0]) for g in gemms[:-1]]})")
     trained = TrainConfig.from_dict(policy.contract.training_config)
     samples = trained.iterations * trained.env.num_envs * trained.num_steps_per_env
@@ -135,7 +136,7 @@ def load_onnx_actor(actor: MLPModel, path: Path) -> None:
             transposed = any(a.name == "transB" and a.i == 1 for a in gemm.attribute)
             weight = weights[gemm.input[1]] if transposed else weights[gemm.input[1]].T
             if tuple(weight.shape) != tuple(layer.weight.shape):
-                raise ValueError(f"{path}: layer {index} is {list(weight.shape)} (out, in), the run's actor has"
+                raise ConfigError(f"{path}: layer {index} is {list(weight.shape)} (out, in), the run's actor has"
                                  f" {list(layer.weight.shape)}: set network.actor_hidden to the file's hidden sizes")
             layer.weight.copy_(torch.tensor(weight))
             layer.bias.copy_(torch.tensor(weights[gemm.input[2]]))

@@ -297,6 +297,12 @@ def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool 
     if init_from is not None and init_from.suffix == ".onnx" and not cfg.critic_warmup_iterations:
         raise ConfigError(f"--init-from {init_from}: an ONNX file holds the actor only; set critic_warmup_iterations > 0"
                           " (e.g. 60) so that the new critic learns the returns before the actor is trained")
+    onnx_actor = None
+    if init_from is not None and init_from.suffix == ".onnx":  # read before anything is written: a mismatch loses nothing
+        from .export import build_actor, load_onnx_actor
+
+        onnx_actor = build_actor(cfg)
+        load_onnx_actor(onnx_actor, init_from)
     if group.rank == 0:
         run_dir.mkdir(parents=True, exist_ok=True)
         config_path.write_text(json.dumps(cfg.to_dict(), indent=2))
@@ -313,10 +319,8 @@ def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool 
         if checkpoint is None:
             raise FileNotFoundError(f"--resume: no model_*.pt in {run_dir}")
         runner.load(str(checkpoint), restore_env=group.world_size == 1)
-    elif init_from is not None and init_from.suffix == ".onnx":
-        from .export import load_onnx_actor
-
-        load_onnx_actor(runner.alg.actor, init_from)
+    elif onnx_actor is not None:
+        runner.alg.actor.load_state_dict(onnx_actor.state_dict())
         set_action_std(runner.alg.actor, cfg.network.init_noise_std)
     elif init_from is not None:
         runner.load(str(init_from), load_cfg={"actor": True, "critic": True}, restore_env=False)

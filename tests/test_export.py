@@ -170,7 +170,10 @@ def test_a_new_run_starts_from_an_exported_policy_and_ship_counts_its_history(ex
     assert main(["train", "--name", "fine", "--runs", str(tmp_path), "--init-from", str(shipped / "policy.onnx"),
                  "--set", *overrides]) != 0
     assert "holds the actor only; set critic_warmup_iterations > 0" in capsys.readouterr().err
-    assert not fine.exists()  # refused before anything was written
+    assert main(["train", "--name", "fine", "--runs", str(tmp_path), "--init-from", str(shipped / "policy.onnx"),
+                 "--set", *overrides, "critic_warmup_iterations=1", "network.actor_hidden=(64, 16)"]) != 0
+    assert "set network.actor_hidden to the file's hidden sizes" in capsys.readouterr().err
+    assert not fine.exists()  # both refused before anything was written
     main(["train", "--name", "fine", "--runs", str(tmp_path), "--init-from", str(shipped / "policy.onnx"),
           "--set", *overrides, "critic_warmup_iterations=1"])
     source = load_actor(run / "model_0.pt", load_run_config(run))

@@ -58,6 +58,7 @@ from tqdm import tqdm
 
 from dynpush.kernels.constraints import CONSTRAINT_GROUPS
 from dynpush.kernels.observations import POLICY_TERMS, PRIVILEGED_TERMS
+from dynpush.runtime.frames import rotation_angle
 from dynpush.runtime.observation import NUM_ARM_JOINTS, quat_to_matrix
 from dynpush.sim.config import ConfigError, LeggedModeConfig, PushEnvConfig
 from dynpush.sim.episode import SHAPES
@@ -355,6 +356,67 @@ class ContactMotionObserver:
         return rows
 
 
+class GoalErrorObserver:
+    """Per world: the object's distance [m] and rotation angle [rad] to its goal (the success test's quantities) at
+    the first step, what the goal asks, and at the last step before the first episode ends (one control step
+    before its end: at the ending step the world is already reset)."""
+
+    def __init__(self, env: PushEnv, count: int):
+        self.env, self.probe, self.count = env, EnvProbe(env), count
+        self.asked_distance = self.asked_angle = self.final_distance = self.final_angle = None
+
+    def _to_goal(self) -> tuple[np.ndarray, np.ndarray]:
+        obj, task = self.probe.object(), self.env.task
+        distance = np.linalg.norm(task.goal_pos.numpy() - obj[:, :3], axis=1)
+        return distance, rotation_angle(obj[:, 3:], task.goal_quat.numpy())
+
+    def observe(self, step: int, in_episode: torch.Tensor, continuing: torch.Tensor) -> None:
+        distance, angle = self._to_goal()
+        if self.asked_distance is None:
+            self.asked_distance, self.asked_angle = distance, angle
+            self.final_distance, self.final_angle = distance.copy(), angle.copy()
+        continuing = continuing.cpu().numpy()
+        self.final_distance = np.where(continuing, distance, self.final_distance)
+        self.final_angle = np.where(continuing, angle, self.final_angle)
+
+    @staticmethod
+    def pooled(observers: list[GoalErrorObserver], name: str) -> np.ndarray:
+        """``name`` (e.g. ``final_distance``) of every evaluated episode, in episode order."""
+        return np.concatenate([getattr(o, name)[: o.count] for o in observers])
+
+    @staticmethod
+    def summary(observers: list[GoalErrorObserver], episodes: FirstEpisodes, success_distance: float,
+                success_angle: float) -> dict:
+        """How the episodes end (percent of all episodes): success, toppled, at the goal with the rotation off,
+        rotation right but away from the goal, both off; the rotation error of those at the goal, and the
+        success rate per bin of the rotation and the distance the goal asks (``GOAL_ANGLE_BINS_DEG``,
+        ``GOAL_DISTANCE_BINS_M``)."""
+        def pooled(name: str) -> np.ndarray:
+            return GoalErrorObserver.pooled(observers, name)
+
+        distance, angle = pooled("final_distance"), pooled("final_angle")
+        failed = ~episodes.success & ~episodes.toppled
+        near, aligned = distance <= success_distance, angle <= success_angle
+        at_goal_rotation_off = failed & near & ~aligned
+
+        def by_bins(asked: np.ndarray, edges: tuple[float, ...], scale: float) -> list[dict]:
+            rows = []
+            for low, high in zip(edges[:-1], edges[1:]):
+                mask = (asked >= low / scale) & (asked < high / scale)
+                rows.append({"from": low, "to": high, "episodes": int(mask.sum()), "success_rate": _percent(episodes.success[mask])})
+            return rows
+
+        return {
+            "outcome_percent": {"success": _percent(episodes.success), "toppled": _percent(episodes.toppled),
+                                "at_goal_rotation_off": _percent(at_goal_rotation_off),
+                                "rotation_right_away_from_goal": _percent(failed & ~near & aligned),
+                                "away_from_goal_rotation_off": _percent(failed & ~near & ~aligned)},
+            "rotation_error_deg_at_goal_rotation_off": _stats(np.degrees(angle[at_goal_rotation_off])),
+            "success_by_goal_rotation_deg": by_bins(pooled("asked_angle"), GOAL_ANGLE_BINS_DEG, 180.0 / math.pi),
+            "success_by_goal_distance_m": by_bins(pooled("asked_distance"), GOAL_DISTANCE_BINS_M, 1.0),
+        }
+
+
 class RewardObserver:
     """The reward of every first-episode step (the environment's weighted sum r1..r4 and each raw term).
 
@@ -389,6 +451,10 @@ class RewardObserver:
         return {"gamma": gamma, "return_to_go": _stats(np.concatenate([o.returns_to_go(gamma) for o in observers])),
                 "term_means_per_step": {name: float(v) for name, v in zip(env.reward_names, terms.mean(axis=0))},
                 "weights": {name: float(w) for name, w in zip(env.reward_names, env.task.reward_weights.numpy())}}
+
+
+GOAL_ANGLE_BINS_DEG = (0.0, 30.0, 90.0, 150.0, 180.01)  # the rotation a goal asks of the object (ours)
+GOAL_DISTANCE_BINS_M = (0.0, 0.5, 1.0, 1.5, 2.01)  # the goal's distance from the object's start (III-B: r <= 2 m)
 
 
 def _percent(mask: np.ndarray) -> float | None:
@@ -436,7 +502,7 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
     env_cfg = env_config_for(policy, cfg.worlds, cfg.noise, cfg.device, cfg.seed, cfg.overrides)
     env = make_push_env(env_cfg)
     rounds = math.ceil(cfg.episodes / cfg.worlds)
-    parts, violated, motions, rewards = [], [], [], []
+    parts, violated, motions, rewards, goal_errors = [], [], [], [], []
     start = time.perf_counter()
     world_steps = rounds * cfg.worlds * env.max_episode_length
     with tqdm(total=world_steps, desc="eval", unit="world-step", unit_scale=True) as bar:
@@ -444,7 +510,8 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
             constraints = ConstraintObserver(env)
             motions.append(ContactMotionObserver(env, env_cfg.control_dt, cfg.episodes - k * cfg.worlds))
             rewards.append(RewardObserver(env, cfg.episodes - k * cfg.worlds))
-            parts.append(run_first_episodes(env, policy, [constraints, motions[-1], rewards[-1]], bar))
+            goal_errors.append(GoalErrorObserver(env, min(cfg.worlds, cfg.episodes - k * cfg.worlds)))
+            parts.append(run_first_episodes(env, policy, [constraints, motions[-1], rewards[-1], goal_errors[-1]], bar))
             violated.append(constraints.violated.cpu().numpy())
     elapsed = time.perf_counter() - start
     episodes = FirstEpisodes.concatenate(parts, cfg.episodes)
@@ -476,6 +543,8 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
             ("object_sliding_force_n", "object_sliding_force"))}
         | {"base_speed_by_sliding_force": ContactMotionObserver.base_speed_by_sliding_force(motions)},
         "by_shape": by_shape,
+        "goal_error": GoalErrorObserver.summary(goal_errors, episodes, env_cfg.rewards.success_distance,
+                                                math.radians(env_cfg.rewards.success_angle_deg)),
         "rewards": RewardObserver.summary(rewards, gamma),
         "paper": {"table_I_row": paper_name, "success_rate": paper_success, "toppled_rate": paper_toppled,
                   "constraint_violation_percent": PAPER_TABLE_II},
@@ -486,16 +555,20 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
     }
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "eval.json").write_text(json.dumps(result, indent=2, allow_nan=False))
-    plot_eval(result, time_to_success, out_dir / "eval.png")
+    final = (GoalErrorObserver.pooled(goal_errors, "final_distance"), np.degrees(GoalErrorObserver.pooled(goal_errors, "final_angle")))
+    plot_eval(result, time_to_success, final, episodes, out_dir / "eval.png")
     return result
 
 
-def plot_eval(result: dict, time_to_success: np.ndarray, path: Path) -> None:
-    """Table II beside the paper's values, Table I (success/toppled) beside the paper's, time to success."""
+def plot_eval(result: dict, time_to_success: np.ndarray, final: tuple[np.ndarray, np.ndarray], episodes: FirstEpisodes,
+              path: Path) -> None:
+    """Table II beside the paper's values, Table I (success/toppled) beside the paper's, time to success, where the
+    episodes end (``final``: distance [m] and rotation error [deg] to the goal) and success by the rotation asked."""
     from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
 
-    fig = Figure(figsize=(16, 4.8), layout="constrained")
-    ax_constraints, ax_rates, ax_time = fig.subplots(1, 3, width_ratios=(2.2, 1.2, 1.2))
+    fig = Figure(figsize=(24, 4.8), layout="constrained")
+    ax_constraints, ax_rates, ax_time, ax_final, ax_asked = fig.subplots(1, 5, width_ratios=(2.2, 1.2, 1.2, 1.2, 1.0))
     names = list(result["constraint_violation_percent"])
     x = np.arange(len(names))
     ours = [result["constraint_violation_percent"][n] for n in names]
@@ -534,6 +607,30 @@ def plot_eval(result: dict, time_to_success: np.ndarray, path: Path) -> None:
     ax_time.set_xlabel("time to success [s]")
     ax_time.set_ylabel("episodes")
     ax_time.set_title("Time to success")
+
+    distance, angle = final
+    success_distance = result["config"]["env"]["rewards"]["success_distance"]
+    success_angle = result["config"]["env"]["rewards"]["success_angle_deg"]
+    failed = ~episodes.success & ~episodes.toppled
+    for mask, label, color in ((episodes.success, "success", "tab:green"), (failed, "failed", "tab:red"),
+                               (episodes.toppled, "toppled", "k")):
+        ax_final.scatter(np.maximum(distance[mask], 1e-3), angle[mask], s=4, alpha=0.5, color=color,
+                         label=f"{label} ({int(mask.sum())})")
+    ax_final.add_patch(Rectangle((1e-3, 0.0), success_distance - 1e-3, success_angle, fill=False, ls="--", color="k"))
+    ax_final.set_xscale("log")
+    ax_final.set_xlabel("object-goal distance at the end [m]")
+    ax_final.set_ylabel("rotation error at the end [deg]")
+    ax_final.set_title("Where episodes end (box: success tolerance)")
+    ax_final.legend(fontsize=7, markerscale=3)
+
+    bins = result["goal_error"]["success_by_goal_rotation_deg"]
+    labels = [f"{b['from']:.0f}-{min(b['to'], 180.0):.0f}" for b in bins]
+    drawn = ax_asked.bar(labels, [np.nan if b["success_rate"] is None else b["success_rate"] for b in bins], color="tab:green")
+    ax_asked.bar_label(drawn, labels=[f"{b['episodes']}" for b in bins], fontsize=7)
+    ax_asked.set_ylim(0, 105)
+    ax_asked.set_xlabel("rotation the goal asks [deg]")
+    ax_asked.set_ylabel("success [%] (bar label: episodes)")
+    ax_asked.set_title("Success by goal rotation")
     noise = "on" if result["config"]["env"]["noise"]["enabled"] else "off"
     fig.suptitle(f"{result['policy']}: {result['episodes']} episodes of {result['config']['env']['episode_length_s']:g} s,"
                  f" observation noise {noise}")

@@ -63,12 +63,12 @@ def tilt_angle(q: ArrayLike) -> float | np.ndarray:
     return np.arccos(np.clip(1.0 - 2.0 * (q[..., 0] ** 2 + q[..., 1] ** 2), -1.0, 1.0))
 
 
-def rotation_angle(q_a: ArrayLike, q_b: ArrayLike) -> float:
-    """Angle [rad] of the rotation between two orientations (x, y, z, w), in [0, pi]."""
+def rotation_angle(q_a: ArrayLike, q_b: ArrayLike) -> float | np.ndarray:
+    """Angle [rad] of the rotation between two orientations (..., 4) (x, y, z, w), in [0, pi]."""
     a = np.asarray(q_a, dtype=np.float64)
     b = np.asarray(q_b, dtype=np.float64)
-    dot = abs(float(a @ b)) / (np.linalg.norm(a) * np.linalg.norm(b))
-    return 2.0 * math.acos(min(1.0, dot))
+    dot = np.abs((a * b).sum(-1)) / (np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1))
+    return 2.0 * np.arccos(np.minimum(1.0, dot))
 
 
 @dataclass

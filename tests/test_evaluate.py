@@ -8,8 +8,8 @@ import torch
 import yaml
 
 from dynpush.cli import main
-from dynpush.policies.evaluate import (EE_CONTACT_COLUMN, ContactMotionObserver, EvalConfig, FootprintConfig, evaluate,
-                                       footprint_study, paper_table_i_row)
+from dynpush.policies.evaluate import (EE_CONTACT_COLUMN, ContactMotionObserver, EvalConfig, FirstEpisodes, FootprintConfig,
+                                       GoalErrorObserver, evaluate, footprint_study, paper_table_i_row)
 from dynpush.policies.export import build_actor, export_policy
 from dynpush.policies.scenarios import (FACE_NAMES, NO_FACE, contact_face, count_face_switches, load_scenario,
                                         parse_scenario, run_scenario)
@@ -58,7 +58,63 @@ def test_eval_writes_tables_json_and_png(policy, tmp_path):
     assert saved["rewards"]["return_to_go"]["count"] == round(12 * saved["episode_length_s"]["mean"] / 0.02)
     assert set(saved["rewards"]["term_means_per_step"]) == set(saved["rewards"]["weights"]) == {
         "task", "reach", "object_velocity", "action_rate"}
+    outcome = saved["goal_error"]["outcome_percent"]
+    assert outcome["success"] + outcome["toppled"] + outcome["at_goal_rotation_off"] + outcome[
+        "rotation_right_away_from_goal"] + outcome["away_from_goal_rotation_off"] == pytest.approx(100.0)
+    assert sum(row["episodes"] for row in saved["goal_error"]["success_by_goal_rotation_deg"]) == 12
+    assert sum(row["episodes"] for row in saved["goal_error"]["success_by_goal_distance_m"]) == 12
     assert is_png(tmp_path / "eval.png")
+
+
+def test_goal_errors_of_hand_made_episodes(small_env):
+    """Four worlds, the goal at (1, 0, 0.35) rotated 90 deg about z. The objects slide from the origin toward the
+    goal over 10 steps; world 0 ends at the goal rotated right (the success flag decides), world 1 at the goal with
+    its start yaw kept, world 2 halfway with the goal's rotation, world 3 halfway with its start yaw but restarts
+    (its episode ends) after step 4: its last state before the end is kept."""
+    from dynpush.runtime.frames import yaw_quat
+
+    steps = 10
+    observer = GoalErrorObserver(small_env, count=4)
+    end = np.array([[1.0, 0.0], [1.0, 0.0], [0.5, 0.0], [0.5, 0.0]])
+    turns = np.array([True, False, True, False])
+
+    class Probe:
+        t = 0
+
+        def object(self):
+            share = self.t / steps
+            poses = [np.concatenate([share * end[w], [0.35], yaw_quat(share * np.pi / 2 if turns[w] else 0.0)])
+                     for w in range(4)]
+            return np.array(poses)
+
+    class Array:  # a Warp array's .numpy()
+        def __init__(self, value):
+            self.value = value
+
+        def numpy(self):
+            return self.value
+
+    task = type("Task", (), {"goal_pos": Array(np.tile([1.0, 0.0, 0.35], (4, 1))),
+                             "goal_quat": Array(np.tile(yaw_quat(np.pi / 2), (4, 1)))})()
+    observer.env, observer.probe = type("Env", (), {"task": task})(), Probe()
+    for step in range(steps):
+        observer.probe.t = step + 1
+        observer.observe(step, torch.ones(4, dtype=torch.bool), torch.tensor([True, True, True, step < 4]))
+    np.testing.assert_allclose(observer.asked_distance, [0.9, 0.9, 0.95, 0.95], atol=1e-9)
+    np.testing.assert_allclose(np.degrees(observer.asked_angle), [81.0, 90.0, 81.0, 90.0], atol=1e-6)
+    np.testing.assert_allclose(observer.final_distance, [0.0, 0.0, 0.5, 0.8], atol=1e-9)  # world 3: after step 3
+    np.testing.assert_allclose(np.degrees(observer.final_angle), [0.0, 90.0, 0.0, 90.0], atol=1e-5)
+
+    episodes = FirstEpisodes(length=np.full(4, steps), success=np.array([True, False, False, False]),
+                             toppled=np.zeros(4, dtype=bool), first_success_step=np.array([10, 0, 0, 0]), shape=np.zeros(4, dtype=int))
+    summary = GoalErrorObserver.summary([observer], episodes, 0.1, np.radians(10.0))
+    assert summary["outcome_percent"] == {"success": 25.0, "toppled": 0.0, "at_goal_rotation_off": 25.0,
+                                          "rotation_right_away_from_goal": 25.0, "away_from_goal_rotation_off": 25.0}
+    assert summary["rotation_error_deg_at_goal_rotation_off"]["median"] == pytest.approx(90.0)
+    rotation_bins = summary["success_by_goal_rotation_deg"]
+    assert [(row["from"], row["episodes"]) for row in rotation_bins] == [(0.0, 0), (30.0, 2), (90.0, 2), (150.0, 0)]
+    assert rotation_bins[1]["success_rate"] == 50.0 and rotation_bins[0]["success_rate"] is None
+    assert [row["episodes"] for row in summary["success_by_goal_distance_m"]] == [0, 4, 0, 0]
 
 
 def test_returns_to_go_of_hand_made_episodes():

@@ -7,6 +7,7 @@ the goal, toppled, undesired-collision and EE-contact share of the steps, per co
 top-down PNG of the first episodes (``dynpush play``'s drawing).
 
     python benchmarks/scripted_push.py [--num-envs 64] [--goal-yaw-difficulty 1.0] [--png scripted.png]
+        [--set push_speed=0.8 object_size=0.4]   # ScriptedPusherConfig fields
 """
 
 from __future__ import annotations
@@ -39,9 +40,10 @@ class ContactObserver:
         self.steps += int(in_episode.sum())
 
 
-def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None) -> dict:
+def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None, overrides: list[str] = ()) -> dict:
     from dynpush.policies.evaluate import run_first_episodes
-    from dynpush.policies.scripted import ScriptedPusher
+    from dynpush.policies.scripted import ScriptedPusher, ScriptedPusherConfig
+    from dynpush.policies.train import apply_overrides
     from dynpush.policies.play import TrajectoryObserver, Trajectories, episode_row, episode_setup, plot_play
     from dynpush.sim.config import ObservationNoiseConfig, PushEnvConfig
     from dynpush.sim.push_env import PushEnv
@@ -49,13 +51,13 @@ def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None) 
     env = PushEnv(PushEnvConfig(num_envs=num_envs, seed=seed, noise=ObservationNoiseConfig(enabled=False)))
     env.set_goal_difficulty(goal_yaw_difficulty)
     env.reset(randomize_episode_step=False)
-    controller = ScriptedPusher(env)
+    controller = ScriptedPusher(env, apply_overrides(ScriptedPusherConfig(), list(overrides)))
     contacts, paths = ContactObserver(env, controller.probe), TrajectoryObserver(env)
     setups = [episode_setup(env, w) for w in range(num_envs)]
     outcome = run_first_episodes(env, controller, [contacts, paths], started=True)
     steps = contacts.steps
     result = {
-        "episodes": num_envs, "goal_yaw_difficulty": goal_yaw_difficulty, "seed": seed,
+        "episodes": num_envs, "goal_yaw_difficulty": goal_yaw_difficulty, "seed": seed, "overrides": list(overrides),
         "success_rate": float(outcome.success.mean()), "reached_within_d_success_rate": float(contacts.reached.mean()),
         "toppled_rate": float(outcome.toppled.mean()),
         "undesired_collision_percent_of_steps": float(100.0 * contacts.collision_steps / steps),
@@ -80,9 +82,12 @@ def main() -> None:
                         help="share of the drawn goal yaw change (the training curriculum; 1 = the paper's task)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--png", default=None, help="top-down picture of the first 8 episodes")
+    parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
+                        help="ScriptedPusherConfig overrides, e.g. push_speed=0.8 object_size=0.4")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    print(json.dumps(run(args.num_envs, args.goal_yaw_difficulty, args.seed, Path(args.png) if args.png else None), indent=1))
+    print(json.dumps(run(args.num_envs, args.goal_yaw_difficulty, args.seed, Path(args.png) if args.png else None, args.set),
+                     indent=1))
 
 
 if __name__ == "__main__":

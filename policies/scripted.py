@@ -32,7 +32,7 @@ observes too (object and end-effector poses, goal), so that a student can imitat
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -79,6 +79,27 @@ class ScriptedPusherConfig:
     back_off_speed: float = 0.3  # m/s
     object_size: float | None = None  # m: None reads the true size, shape and centre of mass; else a nominal cuboid edge
 
+    def validate(self) -> None:
+        """Raises a ConfigError naming the first field outside its allowed range."""
+        speeds = ("push_speed", "approach_speed", "turn_speed", "back_off_speed")
+        shares = ("max_offset", "face_share")
+        for field in fields(self):
+            name, value = field.name, getattr(self, field.name)
+            if name in ("push_arm_action", "carry_arm_action"):
+                if len(value) != 5 or not np.all(np.isfinite(value)):
+                    raise ConfigError(f"scripted.{name} must be 5 finite arm actions, got {value!r}")
+            elif name == "object_size":
+                check_object_size(f"scripted.{name}", value)
+            elif name in speeds and not 0.0 < value <= 1.0:
+                raise ConfigError(f"scripted.{name} must be in (0, 1] m/s (the base command's forward limit), got {value!r}")
+            elif name in shares and not 0.0 < value <= 1.0:
+                raise ConfigError(f"scripted.{name} must be in (0, 1] (a share of the face's half width), got {value!r}")
+            elif name == "push_pitch":
+                if not np.isfinite(value):
+                    raise ConfigError(f"scripted.{name} must be a finite angle [rad], got {value!r}")
+            elif not 0.0 <= value < np.inf:
+                raise ConfigError(f"scripted.{name} must be in [0, inf), got {value!r}")
+
 
 def check_object_size(name: str, size: float | None) -> None:
     """Raises a ConfigError naming ``name`` unless ``size`` is None or a nominal object edge in (0, 2] m."""
@@ -93,6 +114,7 @@ class ScriptedPusher:
         from dynpush.policies.evaluate import EnvProbe
 
         self.env, self.cfg, self.probe = env, cfg or ScriptedPusherConfig(), EnvProbe(env)
+        self.cfg.validate()
         self.base_default = np.asarray(env.cfg.actions.base_default)
         self.base_scale = np.asarray(env.cfg.actions.base_scale)
         rewards = env.cfg.rewards

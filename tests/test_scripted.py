@@ -145,3 +145,21 @@ def test_walks_around_the_object_within_command_limits(small_env):
         assert not env.task.contacts.numpy()[:, :-1].any(), "a robot part other than the end-effector touched the object"
     distance = float(np.linalg.norm(pusher.probe.object()[0, :2] - goal))
     assert distance < start_distance - 0.3
+
+
+@pytest.mark.parametrize("override, message", [
+    ("push_speed=1.5", r"scripted.push_speed must be in \(0, 1\] m/s"),
+    ("max_offset=0.0", r"scripted.max_offset must be in \(0, 1\]"),
+    ("yaw_gain=-0.5", r"scripted.yaw_gain must be in \[0, inf\)"),
+    ("object_size=3.0", r"scripted.object_size must be None or in \(0, 2\] m"),
+    ("push_arm_action=(0.0, 0.2)", r"scripted.push_arm_action must be 5 finite arm actions"),
+])
+def test_overrides_out_of_range_name_the_field(small_env, override, message):
+    """`benchmarks/scripted_push.py --set` applies overrides with the training config's parser; the pusher checks them."""
+    from dynpush.policies.train import apply_overrides
+    from dynpush.sim.config import ConfigError
+
+    cfg = apply_overrides(ScriptedPusherConfig(), [override])
+    with pytest.raises(ConfigError, match=message):
+        ScriptedPusher(small_env, cfg)
+    ScriptedPusher(small_env, apply_overrides(ScriptedPusherConfig(), ["push_speed=0.8", "object_size=0.4"]))

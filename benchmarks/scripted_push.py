@@ -40,7 +40,7 @@ class ContactObserver:
         self.steps += int(in_episode.sum())
 
 
-def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None, overrides: list[str] = ()) -> dict:
+def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None, overrides: tuple[str, ...] = ()) -> dict:
     from dynpush.policies.evaluate import run_first_episodes
     from dynpush.policies.scripted import ScriptedPusher, ScriptedPusherConfig
     from dynpush.policies.train import apply_overrides
@@ -48,16 +48,17 @@ def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None, 
     from dynpush.sim.config import ObservationNoiseConfig, PushEnvConfig
     from dynpush.sim.push_env import PushEnv
 
+    overrides = list(overrides)
     env = PushEnv(PushEnvConfig(num_envs=num_envs, seed=seed, noise=ObservationNoiseConfig(enabled=False)))
     env.set_goal_difficulty(goal_yaw_difficulty)
     env.reset(randomize_episode_step=False)
-    controller = ScriptedPusher(env, apply_overrides(ScriptedPusherConfig(), list(overrides)))
+    controller = ScriptedPusher(env, apply_overrides(ScriptedPusherConfig(), overrides))
     contacts, paths = ContactObserver(env, controller.probe), TrajectoryObserver(env)
     setups = [episode_setup(env, w) for w in range(num_envs)]
     outcome = run_first_episodes(env, controller, [contacts, paths], started=True)
     steps = contacts.steps
     result = {
-        "episodes": num_envs, "goal_yaw_difficulty": goal_yaw_difficulty, "seed": seed, "overrides": list(overrides),
+        "episodes": num_envs, "goal_yaw_difficulty": goal_yaw_difficulty, "seed": seed, "overrides": overrides,
         "success_rate": float(outcome.success.mean()), "reached_within_d_success_rate": float(contacts.reached.mean()),
         "toppled_rate": float(outcome.toppled.mean()),
         "undesired_collision_percent_of_steps": float(100.0 * contacts.collision_steps / steps),

@@ -37,7 +37,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from dynpush.runtime.frames import tilt_angle
-from dynpush.sim.config import ConfigError
+from dynpush.sim.config import ConfigError, _check_positive
 
 
 def wrap(angle: np.ndarray) -> np.ndarray:
@@ -97,8 +97,8 @@ class ScriptedPusherConfig:
             elif name == "push_pitch":
                 if not np.isfinite(value):
                     raise ConfigError(f"scripted.{name} must be a finite angle [rad], got {value!r}")
-            elif not 0.0 <= value < np.inf:
-                raise ConfigError(f"scripted.{name} must be in [0, inf), got {value!r}")
+            else:
+                _check_positive(f"scripted.{name}", value, allow_zero=True)
 
 
 def check_object_size(name: str, size: float | None) -> None:

@@ -150,7 +150,7 @@ def test_walks_around_the_object_within_command_limits(small_env):
 @pytest.mark.parametrize("override, message", [
     ("push_speed=1.5", r"scripted.push_speed must be in \(0, 1\] m/s"),
     ("max_offset=0.0", r"scripted.max_offset must be in \(0, 1\]"),
-    ("yaw_gain=-0.5", r"scripted.yaw_gain must be in \[0, inf\)"),
+    ("yaw_gain=-0.5", r"scripted.yaw_gain must be a finite number >= 0"),
     ("object_size=3.0", r"scripted.object_size must be None or in \(0, 2\] m"),
     ("push_arm_action=(0.0, 0.2)", r"scripted.push_arm_action must be 5 finite arm actions"),
 ])

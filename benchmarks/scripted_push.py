@@ -3,8 +3,9 @@ that reads the true state get on the training task?
 
 Not a learned policy and not a benchmark of speed: a feasibility reference for training and the expert
 that ``dynpush imitate`` distils. Prints one JSON object (success, object ever within ``d_success`` of
-the goal, toppled, undesired-collision and EE-contact share of the steps, per column) and writes a
-top-down PNG of the first episodes (``dynpush play``'s drawing).
+the goal, toppled, undesired-collision and EE-contact share of the steps, per column, and the share of
+each episode every constraint group is violated, Table II as in ``dynpush eval``) and writes a top-down
+PNG of the first episodes (``dynpush play``'s drawing).
 
     python benchmarks/scripted_push.py [--num-envs 64] [--goal-yaw-difficulty 1.0] [--png scripted.png]
         [--set push_speed=0.8 object_size=0.4]   # ScriptedPusherConfig fields
@@ -41,7 +42,7 @@ class ContactObserver:
 
 
 def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None, overrides: tuple[str, ...] = ()) -> dict:
-    from dynpush.policies.evaluate import run_first_episodes
+    from dynpush.policies.evaluate import ConstraintObserver, run_first_episodes
     from dynpush.policies.scripted import ScriptedPusher, ScriptedPusherConfig
     from dynpush.policies.train import apply_overrides
     from dynpush.policies.play import TrajectoryObserver, Trajectories, episode_row, episode_setup, plot_play
@@ -53,9 +54,9 @@ def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None, 
     env.set_goal_difficulty(goal_yaw_difficulty)
     env.reset(randomize_episode_step=False)
     controller = ScriptedPusher(env, apply_overrides(ScriptedPusherConfig(), overrides))
-    contacts, paths = ContactObserver(env, controller.probe), TrajectoryObserver(env)
+    contacts, paths, constraints = ContactObserver(env, controller.probe), TrajectoryObserver(env), ConstraintObserver(env)
     setups = [episode_setup(env, w) for w in range(num_envs)]
-    outcome = run_first_episodes(env, controller, [contacts, paths], started=True)
+    outcome = run_first_episodes(env, controller, [contacts, paths, constraints], started=True)
     steps = contacts.steps
     result = {
         "episodes": num_envs, "goal_yaw_difficulty": goal_yaw_difficulty, "seed": seed, "overrides": overrides,
@@ -64,6 +65,7 @@ def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None, 
         "undesired_collision_percent_of_steps": float(100.0 * contacts.collision_steps / steps),
         "collision_percent_of_steps_per_column": [round(float(100.0 * v / steps), 3) for v in contacts.contact_steps[:-1]],
         "ee_contact_percent_of_steps": float(100.0 * contacts.contact_steps[-1] / steps),
+        "constraint_violation_percent": ConstraintObserver.percent_of_time(constraints.violated.cpu().numpy(), outcome.length),
     }
     if png is not None:
         shown = min(num_envs, 8)

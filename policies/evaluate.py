@@ -277,6 +277,13 @@ class ConstraintObserver:
     def observe(self, step: int, in_episode: torch.Tensor, continuing: torch.Tensor) -> None:
         self.violated += self.env.violated_groups_t & in_episode[:, None]
 
+    @staticmethod
+    def percent_of_time(violated_steps: np.ndarray, length: np.ndarray) -> dict[str, float]:
+        """Table II: per constraint group, the share of each episode's steps with the group violated [%],
+        averaged over episodes; ``violated_steps`` (episodes, groups) counts, ``length`` (episodes,) steps."""
+        violation = 100.0 * (violated_steps / length[:, None]).mean(axis=0)
+        return {name: float(v) for (name, _), v in zip(CONSTRAINT_GROUPS, violation)}
+
 
 class ContactHeightObserver:
     """Collects, per world, the end-effector height (world z, m) at every step it touches the object."""
@@ -518,7 +525,6 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
     violated_steps = np.concatenate(violated)[: cfg.episodes]
 
     dt = env_cfg.control_dt
-    violation = 100.0 * (violated_steps / episodes.length[:, None]).mean(axis=0)
     time_to_success = episodes.first_success_step[episodes.success] * dt
     by_shape = {}
     for index, name in enumerate(SHAPES):
@@ -534,7 +540,7 @@ def evaluate(policy_path: Path, cfg: EvalConfig, out_dir: Path) -> dict:
         "success_rate": _percent(episodes.success),
         "toppled_rate": _percent(episodes.toppled),
         "reached_rate": _percent(episodes.first_success_step > 0),
-        "constraint_violation_percent": {name: float(v) for (name, _), v in zip(CONSTRAINT_GROUPS, violation)},
+        "constraint_violation_percent": ConstraintObserver.percent_of_time(violated_steps, episodes.length),
         "time_to_success_s": _stats(time_to_success),
         "episode_length_s": _stats(episodes.length * dt),
         "while_touching": {key: _stats(ContactMotionObserver.pooled(motions, name)) for key, name in (

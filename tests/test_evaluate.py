@@ -140,6 +140,21 @@ def test_returns_to_go_of_hand_made_episodes():
     assert summary["weights"] == {"task": 2.0, "reach": 1.0}
 
 
+def test_constraint_violation_is_the_mean_over_episodes_of_each_ones_share_of_time():
+    """Table II: a group violated 10 of 100 steps in one episode and never in a 50-step one is violated 5 % of the time
+    (the mean of the episodes' shares, not 10 of 150 pooled steps)."""
+    from dynpush.policies.evaluate import CONSTRAINT_GROUPS, ConstraintObserver
+
+    groups = len(CONSTRAINT_GROUPS)
+    violated_steps = np.zeros((2, groups), dtype=np.int64)
+    violated_steps[0, 0], violated_steps[0, -1], violated_steps[1, -1] = 10, 100, 25
+    percent = ConstraintObserver.percent_of_time(violated_steps, np.array([100, 50]))
+    assert list(percent) == [name for name, _ in CONSTRAINT_GROUPS]
+    assert percent[CONSTRAINT_GROUPS[0][0]] == pytest.approx(5.0)
+    assert percent[CONSTRAINT_GROUPS[-1][0]] == pytest.approx(75.0)
+    assert percent[CONSTRAINT_GROUPS[1][0]] == 0.0
+
+
 def test_contact_motion_of_hand_made_trajectories(small_env):
     """Object at constant acceleration (3, 4) m/s^2, end-effector rising at 0.2 m/s, base heading 2.5 rad and
     moving at 0.3 m/s along it and 0.1 m/s across, commanded 0.45 m/s forward. World 0 touches throughout, world 1 touches but its episode restarts after step 2, world 2 never touches, world 3 is

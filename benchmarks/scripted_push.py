@@ -43,23 +43,22 @@ class ContactObserver:
 
 def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None, overrides: tuple[str, ...] = ()) -> dict:
     from dynpush.policies.evaluate import ConstraintObserver, run_first_episodes
-    from dynpush.policies.scripted import ScriptedPusher, ScriptedPusherConfig
-    from dynpush.policies.train import apply_overrides
+    from dynpush.policies.scripted import ScriptedPusher
+    from dynpush.policies.train import scripted_expert
     from dynpush.policies.play import TrajectoryObserver, Trajectories, episode_row, episode_setup, plot_play
     from dynpush.sim.config import ObservationNoiseConfig, PushEnvConfig
     from dynpush.sim.push_env import PushEnv
 
-    overrides = list(overrides)
     env = PushEnv(PushEnvConfig(num_envs=num_envs, seed=seed, noise=ObservationNoiseConfig(enabled=False)))
     env.set_goal_difficulty(goal_yaw_difficulty)
     env.reset(randomize_episode_step=False)
-    controller = ScriptedPusher(env, apply_overrides(ScriptedPusherConfig(), overrides))
+    controller = ScriptedPusher(env, scripted_expert(None, overrides, "--set"))
     contacts, paths, constraints = ContactObserver(env, controller.probe), TrajectoryObserver(env), ConstraintObserver(env)
     setups = [episode_setup(env, w) for w in range(num_envs)]
     outcome = run_first_episodes(env, controller, [contacts, paths, constraints], started=True)
     steps = contacts.steps
     result = {
-        "episodes": num_envs, "goal_yaw_difficulty": goal_yaw_difficulty, "seed": seed, "overrides": overrides,
+        "episodes": num_envs, "goal_yaw_difficulty": goal_yaw_difficulty, "seed": seed, "overrides": list(overrides),
         "success_rate": float(outcome.success.mean()), "reached_within_d_success_rate": float(contacts.reached.mean()),
         "toppled_rate": float(outcome.toppled.mean()),
         "undesired_collision_percent_of_steps": float(100.0 * contacts.collision_steps / steps),

@@ -66,7 +66,8 @@ def _imitate(args: argparse.Namespace) -> int:
 
     argv = args.argv[args.argv.index("imitate") + 1 :]
     cfg = apply_overrides(TrainConfig.preset_config(args.preset), args.set or [])
-    given = {"rounds": args.rounds, "steps_per_round": args.steps_per_round, "expert_object_size": args.expert_object_size}
+    given = {"rounds": args.rounds, "steps_per_round": args.steps_per_round, "expert_object_size": args.expert_object_size,
+             "expert_overrides": tuple(args.expert_set) if args.expert_set else None}
     imitation = ImitationConfig(**{name: value for name, value in given.items() if value is not None})
     imitate(cfg, imitation, Path(args.runs) / args.name, resume=args.resume, command=shlex.join(["dynpush", "imitate", *argv]))
     return 0
@@ -110,6 +111,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--expert-object-size", type=float, default=None, metavar="METRES",
                    help="the expert assumes every object is a cuboid of this edge with a centred mass (it then acts only on"
                         " what the policy observes); default: it reads the true size, shape and centre of mass; kept on --resume")
+    p.add_argument("--expert-set", nargs="*", metavar="FIELD=VALUE",
+                   help="the expert's other gains (ScriptedPusherConfig fields, e.g. push_speed=1.0; after"
+                        " --expert-object-size); kept on --resume; the fine-tuning's imitation term takes its own:"
+                        " --set \"expert_overrides=('push_speed=1.0',)\"")
     p.add_argument("--set", nargs="*", metavar="FIELD=VALUE", help="override training config fields, as for train")
     p.set_defaults(func=_imitate)
 

@@ -36,7 +36,7 @@ from tqdm import tqdm
 from dynpush.sim.config import ConfigError
 
 from .scripted import ScriptedPusher, ScriptedPusherConfig, check_object_size
-from .train import IMITATION_CHECKPOINT, TrainConfig, record_launch, sigterm_as_keyboard_interrupt
+from .train import IMITATION_CHECKPOINT, TrainConfig, record_launch, scripted_expert, sigterm_as_keyboard_interrupt
 
 
 @dataclass
@@ -53,6 +53,7 @@ class ImitationConfig:
     # m: None, the expert reads the object's true size, shape and centre of mass; a number, it assumes a cuboid
     # of that edge (ScriptedPusherConfig.object_size) and acts on what the student observes too
     expert_object_size: float | None = None
+    expert_overrides: tuple[str, ...] = ()  # more expert gains, FIELD=VALUE of ScriptedPusherConfig, after the size
 
     def validate(self) -> ImitationConfig:
         for name in ("rounds", "steps_per_round", "epochs", "batch_size", "max_samples"):
@@ -64,7 +65,12 @@ class ImitationConfig:
         if not self.learning_rate > 0.0:
             raise ConfigError(f"imitation.learning_rate must be > 0, got {self.learning_rate!r}")
         check_object_size("imitation.expert_object_size", self.expert_object_size)
+        self.expert()
         return self
+
+    def expert(self) -> ScriptedPusherConfig:
+        """The DAgger expert's config: the scripted pusher with ``expert_object_size`` and ``expert_overrides``."""
+        return scripted_expert(self.expert_object_size, self.expert_overrides, "imitation.expert_overrides")
 
 
 class Dagger:
@@ -72,7 +78,7 @@ class Dagger:
 
     def __init__(self, env, actor: torch.nn.Module, cfg: ImitationConfig, action_noise_std: float, seed: int = 0):
         self.env, self.actor, self.cfg, self.action_noise_std = env, actor, cfg, action_noise_std
-        self.expert = ScriptedPusher(env, ScriptedPusherConfig(object_size=cfg.expert_object_size))
+        self.expert = ScriptedPusher(env, cfg.expert())
         self.optimizer = torch.optim.Adam(actor.mlp.parameters(), lr=cfg.learning_rate)
         self.generator = torch.Generator().manual_seed(seed)
         self.observations = torch.zeros(0, env.policy_obs_t.shape[1])
@@ -149,7 +155,8 @@ def imitate(cfg: TrainConfig, imitation: ImitationConfig, run_dir: Path, resume:
         cfg = TrainConfig.from_dict(json.loads(config_path.read_text()))
         # The data set was labelled by the run's expert: keep it (configs older than the field had the true sizes).
         saved_imitation = json.loads((run_dir / "imitation_config.json").read_text())
-        imitation = replace(imitation, expert_object_size=saved_imitation.get("expert_object_size"))
+        imitation = replace(imitation, expert_object_size=saved_imitation.get("expert_object_size"),
+                            expert_overrides=tuple(saved_imitation.get("expert_overrides", ())))
     elif config_path.exists():
         raise FileExistsError(f"{run_dir} holds a run already; choose another --name or pass --resume")
     cfg.validate()

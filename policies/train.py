@@ -15,7 +15,7 @@ import os
 import signal
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 import torch
 
@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from .locomotion_train import LocomotionTrainConfig
 
 PRESETS = ("cpu", "paper")
+T = TypeVar("T")  # a config dataclass
 
 
 @dataclass
@@ -93,6 +94,9 @@ class TrainConfig:
     # treat every object as a centred cuboid of that edge (ScriptedPusherConfig.object_size), the teacher of a
     # ``dynpush imitate --expert-object-size`` student.
     expert_object_size: float | None = None
+    # More of that expert's gains, FIELD=VALUE of ScriptedPusherConfig (e.g. "push_speed=1.0"), the teacher of a
+    # ``dynpush imitate --expert-set`` student.
+    expert_overrides: tuple[str, ...] = ()
 
     @staticmethod
     def preset_config(name: str) -> TrainConfig:
@@ -131,6 +135,7 @@ class TrainConfig:
         if len(self.imitation_weight) != 2 or not all(w >= 0.0 for w in self.imitation_weight):
             raise ConfigError(f"imitation_weight must be (first, last) with both >= 0, got {self.imitation_weight!r}")
         check_object_size("expert_object_size", self.expert_object_size)
+        scripted_expert(self.expert_object_size, self.expert_overrides, "expert_overrides")
         if self.ppo.schedule not in ("adaptive", "fixed"):
             raise ConfigError(f"ppo.schedule must be 'adaptive' or 'fixed', got {self.ppo.schedule!r}")
         return self
@@ -146,7 +151,8 @@ class TrainConfig:
 
         if max(self.imitation_weight) == 0:
             return make_push_env(env)
-        return ExpertLabelledEnv(make_push_env(env), ScriptedPusherConfig(object_size=self.expert_object_size))
+        return ExpertLabelledEnv(make_push_env(env), scripted_expert(self.expert_object_size, self.expert_overrides,
+                                                                    "expert_overrides"))
 
     @staticmethod
     def from_dict(data: dict) -> TrainConfig:
@@ -201,8 +207,8 @@ def _from_dict(cls, data: dict):
     return cls(**kwargs)
 
 
-def apply_overrides(cfg: TrainConfig, overrides: list[str]) -> TrainConfig:
-    """Applies ``dotted.field=value`` overrides (values parsed as Python literals, else strings)."""
+def apply_overrides(cfg: T, overrides: list[str]) -> T:
+    """Applies ``dotted.field=value`` overrides to a config dataclass (values parsed as Python literals, else strings)."""
     for item in overrides:
         if "=" not in item:
             raise ConfigError(f"override must look like field.path=value, got {item!r}")
@@ -234,6 +240,17 @@ def apply_overrides(cfg: TrainConfig, overrides: list[str]) -> TrainConfig:
         if ("None" if value is None else type(value).__name__) not in allowed:
             raise ConfigError(f"{path} must be {expected}, got {text!r}")
         setattr(target, leaf, value)
+    return cfg
+
+
+def scripted_expert(object_size: float | None, overrides: tuple[str, ...], name: str) -> ScriptedPusherConfig:
+    """The scripted pusher's config for imitation: ``object_size`` (None: the true size) and then ``overrides``
+    (FIELD=VALUE of ScriptedPusherConfig) on its defaults, checked; errors name the config field ``name``."""
+    try:
+        cfg = apply_overrides(ScriptedPusherConfig(object_size=object_size), list(overrides))
+        cfg.validate()
+    except ConfigError as error:
+        raise ConfigError(f"{name}: {error}") from None
     return cfg
 
 

@@ -74,7 +74,7 @@ def observations_dict(observations: np.ndarray):
 
 def test_interrupted_imitation_resumes_after_its_last_round(tmp_path):
     run = tmp_path / "bc"
-    imitate(tiny(), replace(tiny_imitation(1), expert_object_size=0.4), run)
+    imitate(tiny(), replace(tiny_imitation(1), expert_object_size=0.4, expert_overrides=("push_speed=0.9",)), run)
     with pytest.raises(FileExistsError, match="holds a run already"):
         imitate(tiny(), tiny_imitation(2), run)
     imitate(tiny(), tiny_imitation(2), run, resume=True)
@@ -84,7 +84,8 @@ def test_interrupted_imitation_resumes_after_its_last_round(tmp_path):
     launches = [json.loads(line) for line in (run / "launches.jsonl").read_text().splitlines()]
     assert [launch["resume"] for launch in launches] == [False, True]
     # The resumed rounds are labelled by the run's own expert, not by the default one of the resuming call.
-    assert json.loads((run / "imitation_config.json").read_text())["expert_object_size"] == 0.4
+    saved = json.loads((run / "imitation_config.json").read_text())
+    assert saved["expert_object_size"] == 0.4 and saved["expert_overrides"] == ["push_speed=0.9"]
 
 
 def test_imitation_config_errors_name_the_field():
@@ -94,6 +95,16 @@ def test_imitation_config_errors_name_the_field():
         ImitationConfig(expert_share=1.5).validate()
     with pytest.raises(ConfigError, match=r"imitation.expert_object_size must be None or in \(0, 2\] m"):
         ImitationConfig(expert_object_size=0.0).validate()
+    with pytest.raises(ConfigError, match=r"imitation.expert_overrides: scripted.push_speed must be in \(0, 1\] m/s"):
+        ImitationConfig(expert_overrides=("push_speed=1.5",)).validate()
+    with pytest.raises(ConfigError, match="imitation.expert_overrides: unknown config field 'push_sped'"):
+        ImitationConfig(expert_overrides=("push_sped=0.9",)).validate()
+    with pytest.raises(ConfigError, match="expert_overrides: override must look like field.path=value"):
+        replace(tiny(), expert_overrides=("push_speed",)).validate()
+    with pytest.raises(ConfigError, match=r"^expert_overrides: scripted.yaw_gain must be a finite number >= 0"):
+        replace(tiny(), expert_overrides=("yaw_gain=-1.0",)).validate()
+    expert = ImitationConfig(expert_object_size=0.4, expert_overrides=("push_speed=0.9", "yaw_gain=0.6")).expert()
+    assert (expert.object_size, expert.push_speed, expert.yaw_gain) == (0.4, 0.9, 0.6)
     with pytest.raises(ConfigError, match="critic_warmup_iterations must be an integer >= 0"):
         tiny(warmup=-1).validate()
 
@@ -185,6 +196,12 @@ def test_the_imitation_term_can_take_the_nominal_size_teacher_of_a_dagger_studen
     nominal = ScriptedPusher(env.env, ScriptedPusherConfig(object_size=0.4))(None)
     np.testing.assert_allclose(labels, nominal, atol=1e-6)
     assert np.abs(labels - ScriptedPusher(env.env)(None)).max() > 0.05  # not the privileged teacher's
+    slower = apply_overrides(cfg, ["expert_overrides=('approach_speed=0.5',)"])  # the robots start away from the object
+    slow_env = slower.make_env(slower.validate().env)
+    slow_labels = slow_env.get_observations()[EXPERT_ACTION_GROUP].numpy()
+    slow = ScriptedPusher(slow_env.env, ScriptedPusherConfig(object_size=0.4, approach_speed=0.5))(None)
+    np.testing.assert_allclose(slow_labels, slow, atol=1e-6)
+    assert np.abs(slow_labels - ScriptedPusher(slow_env.env, ScriptedPusherConfig(object_size=0.4))(None)).max() > 0.1
 
 
 def test_a_new_run_starts_from_another_runs_imitation_actor_with_its_own_optimizer_and_noise(tmp_path):
@@ -221,12 +238,14 @@ def test_a_new_run_starts_from_another_runs_imitation_actor_with_its_own_optimiz
     assert both["hours"] == pytest.approx(alone["hours"] + upstream["imitation"]["wall_clock_h"])
 
 
-def test_cli_passes_the_expert_object_size(tmp_path, monkeypatch):
+def test_cli_passes_the_experts_size_and_gains(tmp_path, monkeypatch):
     from dynpush import cli
     from dynpush.policies import imitation
 
     calls = []
     monkeypatch.setattr(imitation, "imitate", lambda cfg, imitation_cfg, run_dir, **kwargs: calls.append(imitation_cfg))
     common = ["imitate", "--name", "bc", "--runs", str(tmp_path), "--rounds", "3"]
-    assert cli.main([*common, "--expert-object-size", "0.4"]) == 0 and cli.main(common) == 0
-    assert [(c.rounds, c.expert_object_size) for c in calls] == [(3, 0.4), (3, None)]
+    assert cli.main([*common, "--expert-object-size", "0.4", "--expert-set", "push_speed=1.0"]) == 0
+    assert cli.main(common) == 0
+    assert [(c.rounds, c.expert_object_size, c.expert_overrides) for c in calls] == [
+        (3, 0.4, ("push_speed=1.0",)), (3, None, ())]

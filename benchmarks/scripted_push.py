@@ -4,8 +4,9 @@ that reads the true state get on the training task?
 Not a learned policy and not a benchmark of speed: a feasibility reference for training and the expert
 that ``dynpush imitate`` distils. Prints one JSON object (success, object ever within ``d_success`` of
 the goal, toppled, undesired-collision and EE-contact share of the steps, per column, and the share of
-each episode every constraint group is violated, Table II as in ``dynpush eval``) and writes a top-down
-PNG of the first episodes (``dynpush play``'s drawing).
+each episode every constraint group is violated, Table II as in ``dynpush eval``; how the episodes end and
+the success per goal rotation and distance, ``goal_error`` as in ``dynpush eval``) and writes a top-down PNG of
+the first episodes (``dynpush play``'s drawing).
 
     python benchmarks/scripted_push.py [--num-envs 64] [--goal-yaw-difficulty 1.0] [--png scripted.png]
         [--set push_speed=0.8 object_size=0.4]   # ScriptedPusherConfig fields
@@ -42,7 +43,7 @@ class ContactObserver:
 
 
 def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None, overrides: tuple[str, ...] = ()) -> dict:
-    from dynpush.policies.evaluate import ConstraintObserver, run_first_episodes
+    from dynpush.policies.evaluate import ConstraintObserver, GoalErrorObserver, run_first_episodes
     from dynpush.policies.scripted import ScriptedPusher
     from dynpush.policies.train import scripted_expert
     from dynpush.policies.play import TrajectoryObserver, Trajectories, episode_row, episode_setup, plot_play
@@ -54,8 +55,10 @@ def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None, 
     env.reset(randomize_episode_step=False)
     controller = ScriptedPusher(env, scripted_expert(None, overrides, "--set"))
     contacts, paths, constraints = ContactObserver(env, controller.probe), TrajectoryObserver(env), ConstraintObserver(env)
+    goal_errors = GoalErrorObserver(env, num_envs)
     setups = [episode_setup(env, w) for w in range(num_envs)]
-    outcome = run_first_episodes(env, controller, [contacts, paths, constraints], started=True)
+    outcome = run_first_episodes(env, controller, [contacts, paths, constraints, goal_errors], started=True)
+    rewards = env.cfg.rewards
     steps = contacts.steps
     result = {
         "episodes": num_envs, "goal_yaw_difficulty": goal_yaw_difficulty, "seed": seed, "overrides": list(overrides),
@@ -65,6 +68,8 @@ def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None, 
         "collision_percent_of_steps_per_column": [round(float(100.0 * v / steps), 3) for v in contacts.contact_steps[:-1]],
         "ee_contact_percent_of_steps": float(100.0 * contacts.contact_steps[-1] / steps),
         "constraint_violation_percent": ConstraintObserver.percent_of_time(constraints.violated.cpu().numpy(), outcome.length),
+        "goal_error": GoalErrorObserver.summary([goal_errors], outcome, rewards.success_distance,
+                                                np.radians(rewards.success_angle_deg)),
     }
     if png is not None:
         shown = min(num_envs, 8)

@@ -165,17 +165,10 @@ def test_overrides_out_of_range_name_the_field(small_env, override, message):
     ScriptedPusher(small_env, apply_overrides(ScriptedPusherConfig(), ["push_speed=0.8", "object_size=0.4"]))
 
 
-def test_benchmark_reports_how_the_episodes_end():
+def test_benchmark_reports_how_the_episodes_end(load_benchmark):
     """`benchmarks/scripted_push.py` sorts every episode as `dynpush eval` does (goal_error): its success and toppled
     shares are the run's, and each episode falls in one bin of the rotation and of the distance its goal asks."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "scripted_push.py"
-    spec = importlib.util.spec_from_file_location("scripted_push", path)
-    benchmark = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(benchmark)
-    result = benchmark.run(num_envs=3, goal_yaw_difficulty=1.0, seed=2, png=None)
+    result = load_benchmark("scripted_push").run(num_envs=3, goal_yaw_difficulty=1.0, seed=2, png=None)
     outcome = result["goal_error"]["outcome_percent"]
     assert outcome["success"] == pytest.approx(100.0 * result["success_rate"])
     assert outcome["toppled"] == pytest.approx(100.0 * result["toppled_rate"])

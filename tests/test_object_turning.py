@@ -1,0 +1,65 @@
+"""`benchmarks/object_turning.py`: its quasi-static pushing model against an independent wrench balance, and the
+object-floor contacts it reports."""
+
+import math
+
+import numpy as np
+import pytest
+
+from dynpush.sim.episode import EpisodeSpec
+
+
+def coulomb_wrench(support, centre, sign):
+    """Independent reference, point by point: force and moment about the origin of unit-load Coulomb friction at
+    each support point of an object turning about ``centre`` (counter-clockwise for sign +1)."""
+    total = np.zeros(3)
+    for x, y in support:
+        vx, vy = -sign * (y - centre[1]), sign * (x - centre[0])
+        speed = math.hypot(vx, vy)
+        fx, fy = -vx / speed, -vy / speed
+        total += [fx, fy, x * fy - y * fx]
+    return total / len(support)
+
+
+@pytest.mark.parametrize("support_model", ["corners", "uniform"])
+@pytest.mark.parametrize("offset", [-0.15, 0.06, 0.19])
+def test_centre_of_rotation_balances_the_push(load_benchmark, support_model, offset):
+    """Turning about the returned centre, the floor's friction wrench opposes the push wrench, and the pushed point
+    moves along the push (a pusher cannot pull)."""
+    turning = load_benchmark("object_turning")
+    support = turning.bottom_supports(0.5, 0.4, points=15)[support_model]
+    contact, push = np.array([-0.25, offset]), np.array([1.0, 0.0])
+    centre, residual = turning.quasi_static_centre_of_rotation(support, contact, push)
+    assert residual < 1e-3
+    push_wrench = np.array([push[0], push[1], contact[0] * push[1] - contact[1] * push[0]])
+    balancing = []
+    for sign in (1.0, -1.0):
+        friction = coulomb_wrench(support, centre, sign)
+        cosine = -friction @ push_wrench / (np.linalg.norm(friction) * np.linalg.norm(push_wrench))
+        contact_velocity = sign * np.array([-(contact[1] - centre[1]), contact[0] - centre[0]])
+        balancing.append(cosine > 1.0 - 1e-5 and contact_velocity @ push > 0.0)
+    assert any(balancing)
+
+
+def test_turning_grows_with_the_offset_and_a_uniform_support(load_benchmark):
+    """kappa = 1 / |centre|: zero through the centre, the same for mirrored offsets, larger for a larger offset, and
+    larger on a uniform pressure than on the four corners (less friction moment per unit load)."""
+    turning = load_benchmark("object_turning")
+    supports, push = turning.bottom_supports(0.5, 0.5, points=15), np.array([1.0, 0.0])
+
+    def kappa(model, offset):
+        centre, _ = turning.quasi_static_centre_of_rotation(supports[model], np.array([-0.25, offset]), push)
+        return 0.0 if centre is None else 1.0 / np.linalg.norm(centre)
+
+    for model in ("corners", "uniform"):
+        assert kappa(model, 0.0) == 0.0
+        assert kappa(model, -0.15) == pytest.approx(kappa(model, 0.15), rel=1e-3)
+        assert 0.0 < kappa(model, 0.05) < kappa(model, 0.1) < kappa(model, 0.2)
+    assert kappa("uniform", 0.15) > 1.5 * kappa("corners", 0.15)
+
+
+def test_a_cuboid_rests_on_four_contacts(small_env, load_benchmark):
+    """Newton puts a box on the floor at four contacts (its bottom corners): the support the benchmark's corner
+    model assumes."""
+    small_env.set_episodes({w: EpisodeSpec(dims=(0.5, 0.4 + 0.1 * w, 0.6)) for w in range(small_env.num_envs)})
+    assert load_benchmark("object_turning").object_floor_contacts(small_env).tolist() == [4] * small_env.num_envs

@@ -6,12 +6,14 @@ policy fail most (``goal_error`` of ``dynpush eval``: at the goal with the rotat
 each box from behind toward a far goal with a large yaw error, so that it pushes at its largest contact offset
 (``ScriptedPusherConfig.max_offset``). From the first end-effector contact until the box has turned
 ``TURN_WINDOW_DEG`` or travelled ``TRAVEL_WINDOW_M`` the script measures kappa and the end-effector's mean offset
-from the box's centre across the push. Quasi-static pushing (a frictionless point pusher, Coulomb friction where the
-box rests; Mason 1986) predicts kappa at that offset for two ways the box rests on the floor: on its four bottom
-corners (the contacts Newton generates for a box on a plane, counted here) and on a uniform pressure over its
-bottom face. Prints one JSON object.
+from the box's centre across the push. Quasi-static pushing (Coulomb friction where the box rests; Mason 1986)
+predicts kappa at that offset for two pushers, a frictionless point (the contact slides along the face) and one the
+contact sticks to, and two ways the box rests on the floor: on its four bottom corners (the contacts Newton generates
+for a box on a plane, counted here) and on a uniform pressure over its bottom face. The sticking contact needs the
+push force within the end-effector-object friction cone (``push_force_angle_deg`` against ``ee_object_friction``,
+the mean of the two shapes' coefficients). Prints one JSON object.
 
-    python benchmarks/object_turning.py [--steps 600]
+    python benchmarks/object_turning.py [--steps 600] [--set sim.solver=mujoco sim.substeps=8]   # PushEnvConfig fields
 """
 
 from __future__ import annotations
@@ -45,33 +47,75 @@ def friction_wrench(support: np.ndarray, cor: np.ndarray, sign: float) -> np.nda
     return np.concatenate([force.mean(1), moment.mean(1, keepdims=True)], axis=1)
 
 
-def quasi_static_centre_of_rotation(support: np.ndarray, contact: np.ndarray, push: np.ndarray) -> tuple[np.ndarray | None, float]:
-    """Where an object resting on ``support`` points (k, 2) [m] turns about when a frictionless point at
-    ``contact`` (2,) [m] pushes it along the unit ``push``: the centre of rotation whose friction wrench balances the
-    push wrench, found on a polar grid about the origin (1 mm to 1 km) refined three times. Returns the centre (None
-    for a pure translation: a push through the origin of a support symmetric about it) and the residual (norm of the
-    difference of the unit wrenches; 0 at an exact balance)."""
+PUSHERS = ("frictionless", "sticking")
+
+
+def _grid_search(error, bounds: list[tuple[float, float]], rounds: int = 4, points: int = 120) -> tuple[np.ndarray, float]:
+    """Minimises ``error`` (m, d) -> (m,) over the box ``bounds`` on a grid of ``points`` per axis, zoomed ``rounds``
+    times onto +-3 cells about the best point. Returns the best point (d,) and its error."""
+    best, best_error = None, np.inf
+    for _ in range(rounds):
+        axes = [np.linspace(lo, hi, points) for lo, hi in bounds]
+        grid = np.stack([g.ravel() for g in np.meshgrid(*axes)], axis=1)
+        errors = error(grid)
+        k = int(np.argmin(errors))
+        if errors[k] < best_error:
+            best, best_error = grid[k], float(errors[k])
+        bounds = [(x - 3 * (hi - lo) / (points - 1), x + 3 * (hi - lo) / (points - 1)) for x, (lo, hi) in zip(best, bounds)]
+    return best, best_error
+
+
+def quasi_static_centre_of_rotation(support: np.ndarray, contact: np.ndarray, push: np.ndarray,
+                                    pusher: str = "frictionless") -> tuple[np.ndarray | None, float]:
+    """Where an object resting on ``support`` points (k, 2) [m] turns about when a point pushes it at ``contact``
+    (2,) [m] along the unit ``push``:
+
+    - ``frictionless``: the push force is along ``push`` and the contact may slide along the face; the centre of
+      rotation is where the floor's friction wrench is opposite to the push wrench (a polar grid about the origin,
+      1 mm to 1 km);
+    - ``sticking``: friction holds the contact on the pusher, which moves along ``push``; the centre lies on the line
+      through the contact across the push, where the friction wrench has no moment about the contact (a point
+      pushes with a force, not a torque).
+
+    Returns the centre (None for a pure translation: a push through the origin of a support symmetric about it) and
+    the residual of the balance (0 when exact)."""
     push_moment = contact[0] * push[1] - contact[1] * push[0]
     if abs(push_moment) < 1e-12:
         return None, 0.0
-    target = -np.array([push[0], push[1], push_moment])
-    target /= np.linalg.norm(target)
-    log_radius, angle = (np.log(1e-3), np.log(1e3)), (0.0, 2.0 * np.pi)
-    best = (np.inf, 0.0, 0.0)
-    for _ in range(4):
-        radii, angles = np.exp(np.linspace(*log_radius, 120)), np.linspace(*angle, 120)
-        r, a = (g.ravel() for g in np.meshgrid(radii, angles))
-        cor = np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
-        for sign in (1.0, -1.0):
-            wrench = friction_wrench(support, cor, sign)
-            error = np.linalg.norm(wrench / np.linalg.norm(wrench, axis=1, keepdims=True) - target, axis=1)
-            k = int(np.argmin(error))
-            if error[k] < best[0]:
-                best = (float(error[k]), float(r[k]), float(a[k]))
-        log_step, angle_step = (log_radius[1] - log_radius[0]) / 119, (angle[1] - angle[0]) / 119
-        log_radius = (np.log(best[1]) - 3 * log_step, np.log(best[1]) + 3 * log_step)
-        angle = (best[2] - 3 * angle_step, best[2] + 3 * angle_step)
-    return best[1] * np.array([math.cos(best[2]), math.sin(best[2])]), best[0]
+    if pusher == "frictionless":
+        target = -np.array([push[0], push[1], push_moment]) / math.hypot(1.0, push_moment)
+
+        def error(grid):  # (log radius, angle, rotation sign)
+            cor = np.exp(grid[:, :1]) * np.stack([np.cos(grid[:, 1]), np.sin(grid[:, 1])], axis=1)
+            wrenches = [friction_wrench(support, cor, sign) for sign in (1.0, -1.0)]
+            return np.min([np.linalg.norm(w / np.linalg.norm(w, axis=1, keepdims=True) - target, axis=1)
+                           for w in wrenches], axis=0)
+
+        (log_radius, angle), residual = _grid_search(error, [(math.log(1e-3), math.log(1e3)), (0.0, 2.0 * math.pi)])
+        return math.exp(log_radius) * np.array([math.cos(angle), math.sin(angle)]), residual
+    if pusher != "sticking":
+        raise ValueError(f"pusher must be one of {PUSHERS}, got {pusher!r}")
+    across = np.array([-push[1], push[0]])
+
+    def error(grid):  # the centre at contact + sinh(t) * across; the contact moves along +push for sign(t)
+        along = np.sinh(grid[:, 0])
+        cor = contact[None] + along[:, None] * across[None]
+        wrench = np.where(along[:, None] > 0, friction_wrench(support, cor, 1.0), friction_wrench(support, cor, -1.0))
+        moment_about_contact = wrench[:, 2] - (contact[0] * wrench[:, 1] - contact[1] * wrench[:, 0])
+        return np.abs(moment_about_contact) / np.linalg.norm(wrench[:, :2], axis=1)
+
+    (t,), residual = _grid_search(error, [(-8.0, 8.0)], points=4000)
+    return contact + math.sinh(t) * across, residual
+
+
+def push_force_angle_deg(support: np.ndarray, centre: np.ndarray, contact: np.ndarray, push: np.ndarray) -> float:
+    """Angle [deg] between the force the pusher applies (balancing the floor's friction while the object turns
+    about ``centre`` with its contact moving along ``push``) and ``push``: within the pusher-object friction cone
+    (atan mu) for a sticking contact."""
+    offset = contact - centre
+    sign = 1.0 if (-offset[1] * push[0] + offset[0] * push[1]) > 0 else -1.0  # contact velocity along +push
+    force = -friction_wrench(support, centre[None], sign)[0, :2]
+    return math.degrees(math.atan2(abs(push[0] * force[1] - push[1] * force[0]), force @ push))
 
 
 def bottom_supports(length: float, width: float, points: int = 31) -> dict[str, np.ndarray]:
@@ -81,22 +125,30 @@ def bottom_supports(length: float, width: float, points: int = 31) -> dict[str, 
             "uniform": np.stack(np.meshgrid(x, y), axis=-1).reshape(-1, 2)}
 
 
-def measure(steps: int) -> list[dict]:
+def measure(steps: int, overrides: tuple[str, ...] = ()) -> list[dict]:
     """Pushes every box of ``BOXES`` in its own world with the scripted pusher; per box the measured kappa [rad/m],
-    the end-effector's mean offset across the push [m] and the object-floor contacts at the start."""
+    the end-effector's mean offset across the push [m], the object-floor contacts at the start and the
+    end-effector-object friction coefficient. ``overrides``:
+    ``PushEnvConfig`` fields (``sim.solver=mujoco``), with the training config's parser."""
+    from dynpush.assets_usd import EE_SHAPE
     from dynpush.policies.evaluate import yaw_of
     from dynpush.policies.scripted import ScriptedPusher, ScriptedPusherConfig
+    from dynpush.policies.train import apply_overrides
     from dynpush.sim.config import ObservationNoiseConfig, PushEnvConfig
     from dynpush.sim.episode import EpisodeSpec
     from dynpush.sim.push_env import PushEnv
 
     n = len(BOXES)
-    env = PushEnv(PushEnvConfig(num_envs=n, seed=0, noise=ObservationNoiseConfig(enabled=False)))
+    env_cfg = apply_overrides(PushEnvConfig(num_envs=n, seed=0, noise=ObservationNoiseConfig(enabled=False)), overrides)
+    env = PushEnv(env_cfg)
     # A goal 3 m ahead with 1.2 rad to turn: the pusher holds its largest offset, to the right of the push (+x).
     env.set_episodes({w: EpisodeSpec(dims=dims, mass=5.0, friction=0.8, goal=(3.0, 0.0, 1.2), base=(-1.6, 0.0, 0.0))
                       for w, (_, dims) in enumerate(BOXES)})
     pusher = ScriptedPusher(env, ScriptedPusherConfig())
     floor_contacts = object_floor_contacts(env)
+    model = env.scene.model
+    mu, world = model.shape_material_mu.numpy(), model.shape_world.numpy()
+    ee_mu = {int(world[i]): float(mu[i]) for i, label in enumerate(model.shape_label) if label.endswith(EE_SHAPE)}
     start_yaw = np.full(n, np.nan)
     turned, travelled, offset_sum, contact_steps = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
     previous = pusher.probe.object()[:, :2].copy()
@@ -114,6 +166,7 @@ def measure(steps: int) -> list[dict]:
         contact_steps += in_contact
         previous = obj[:, :2].copy()
     return [{"box": label, "dims_m": list(dims), "object_floor_contacts": int(floor_contacts[w]),
+             "ee_object_friction": 0.5 * (ee_mu[w] + float(mu[env.scene.object_shape[w]])),
              "measured_kappa_rad_per_m": float(abs(turned[w]) / max(travelled[w], 1e-9)),
              "turned_deg": float(math.degrees(turned[w])), "travelled_m": float(travelled[w]),
              "ee_offset_across_push_m": float(offset_sum[w] / max(contact_steps[w], 1))}
@@ -134,26 +187,31 @@ def object_floor_contacts(env) -> np.ndarray:
     return per_world
 
 
-def run(steps: int) -> dict:
-    rows = measure(steps)
+def run(steps: int, overrides: tuple[str, ...] = ()) -> dict:
+    rows = measure(steps, overrides)
     for row in rows:
         length, width, _ = row["dims_m"]
-        contact = np.array([-length / 2, row["ee_offset_across_push_m"]])
-        for name, support in bottom_supports(length, width).items():
-            centre, residual = quasi_static_centre_of_rotation(support, contact, np.array([1.0, 0.0]))
-            kappa = 0.0 if centre is None else 1.0 / float(np.linalg.norm(centre))  # |omega| / |omega x centre|
-            row[f"quasi_static_kappa_{name}_rad_per_m"] = kappa
-            row[f"measured_over_{name}"] = row["measured_kappa_rad_per_m"] / kappa if kappa > 0 else None
-            row[f"residual_{name}"] = residual
-    return {"turn_window_deg": TURN_WINDOW_DEG, "travel_window_m": TRAVEL_WINDOW_M, "steps": steps, "boxes": rows}
+        contact, push = np.array([-length / 2, row["ee_offset_across_push_m"]]), np.array([1.0, 0.0])
+        for support_name, support in bottom_supports(length, width).items():
+            for pusher in PUSHERS:
+                centre, residual = quasi_static_centre_of_rotation(support, contact, push, pusher)
+                kappa = 0.0 if centre is None else 1.0 / float(np.linalg.norm(centre))  # |omega| / |omega x centre|
+                row[f"model_{pusher}_{support_name}"] = {
+                    "kappa_rad_per_m": kappa, "measured_over_model": row["measured_kappa_rad_per_m"] / kappa if kappa else None,
+                    "push_force_angle_deg": None if centre is None else push_force_angle_deg(support, centre, contact, push),
+                    "residual": residual}
+    return {"turn_window_deg": TURN_WINDOW_DEG, "travel_window_m": TRAVEL_WINDOW_M, "steps": steps,
+            "overrides": list(overrides), "boxes": rows}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--steps", type=int, default=600, help="control steps (50 Hz) to push for")
+    parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
+                        help="PushEnvConfig overrides, e.g. sim.solver=mujoco sim.xpbd_iterations=8")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    print(json.dumps(run(args.steps), indent=1))
+    print(json.dumps(run(args.steps, tuple(args.set)), indent=1))
 
 
 if __name__ == "__main__":

@@ -23,13 +23,13 @@ def coulomb_wrench(support, centre, sign):
 
 @pytest.mark.parametrize("support_model", ["corners", "uniform"])
 @pytest.mark.parametrize("offset", [-0.15, 0.06, 0.19])
-def test_centre_of_rotation_balances_the_push(load_benchmark, support_model, offset):
+def test_frictionless_push_is_balanced(load_benchmark, support_model, offset):
     """Turning about the returned centre, the floor's friction wrench opposes the push wrench, and the pushed point
     moves along the push (a pusher cannot pull)."""
     turning = load_benchmark("object_turning")
     support = turning.bottom_supports(0.5, 0.4, points=15)[support_model]
     contact, push = np.array([-0.25, offset]), np.array([1.0, 0.0])
-    centre, residual = turning.quasi_static_centre_of_rotation(support, contact, push)
+    centre, residual = turning.quasi_static_centre_of_rotation(support, contact, push, "frictionless")
     assert residual < 1e-3
     push_wrench = np.array([push[0], push[1], contact[0] * push[1] - contact[1] * push[0]])
     balancing = []
@@ -39,23 +39,55 @@ def test_centre_of_rotation_balances_the_push(load_benchmark, support_model, off
         contact_velocity = sign * np.array([-(contact[1] - centre[1]), contact[0] - centre[0]])
         balancing.append(cosine > 1.0 - 1e-5 and contact_velocity @ push > 0.0)
     assert any(balancing)
+    assert turning.push_force_angle_deg(support, centre, contact, push) == pytest.approx(0.0, abs=0.5)
 
 
-def test_turning_grows_with_the_offset_and_a_uniform_support(load_benchmark):
+@pytest.mark.parametrize("support_model", ["corners", "uniform"])
+@pytest.mark.parametrize("offset", [-0.15, 0.06, 0.19])
+def test_sticking_push_is_balanced(load_benchmark, support_model, offset):
+    """The centre lies across the push from the contact, the contact moves along the push, and the floor's friction
+    has no moment about the contact; the push force's angle from the push direction is the friction force's."""
+    turning = load_benchmark("object_turning")
+    support = turning.bottom_supports(0.5, 0.4, points=15)[support_model]
+    contact, push = np.array([-0.25, offset]), np.array([1.0, 0.0])
+    centre, residual = turning.quasi_static_centre_of_rotation(support, contact, push, "sticking")
+    assert residual < 1e-6
+    assert centre[0] == pytest.approx(contact[0])
+    sign = 1.0 if centre[1] > contact[1] else -1.0  # counter-clockwise about a centre to the left moves it along +x
+    friction = coulomb_wrench(support, centre, sign)
+    assert friction[2] - (contact[0] * friction[1] - contact[1] * friction[0]) == pytest.approx(0.0, abs=1e-6)
+    assert -friction[0] > 0.0  # the pusher pushes forward
+    expected = math.degrees(math.atan2(abs(friction[1]), -friction[0]))
+    assert turning.push_force_angle_deg(support, centre, contact, push) == pytest.approx(expected, abs=1e-6)
+
+
+@pytest.mark.parametrize("pusher", ["frictionless", "sticking"])
+def test_turning_grows_with_the_offset_and_a_uniform_support(load_benchmark, pusher):
     """kappa = 1 / |centre|: zero through the centre, the same for mirrored offsets, larger for a larger offset, and
     larger on a uniform pressure than on the four corners (less friction moment per unit load)."""
     turning = load_benchmark("object_turning")
     supports, push = turning.bottom_supports(0.5, 0.5, points=15), np.array([1.0, 0.0])
 
     def kappa(model, offset):
-        centre, _ = turning.quasi_static_centre_of_rotation(supports[model], np.array([-0.25, offset]), push)
+        centre, _ = turning.quasi_static_centre_of_rotation(supports[model], np.array([-0.25, offset]), push, pusher)
         return 0.0 if centre is None else 1.0 / np.linalg.norm(centre)
 
     for model in ("corners", "uniform"):
         assert kappa(model, 0.0) == 0.0
         assert kappa(model, -0.15) == pytest.approx(kappa(model, 0.15), rel=1e-3)
         assert 0.0 < kappa(model, 0.05) < kappa(model, 0.1) < kappa(model, 0.2)
-    assert kappa("uniform", 0.15) > 1.5 * kappa("corners", 0.15)
+    assert kappa("uniform", 0.15) > 1.3 * kappa("corners", 0.15)
+
+
+def test_sticking_turns_less_than_a_sliding_contact(load_benchmark):
+    """Friction that holds the contact on the pusher also resists the turn."""
+    turning = load_benchmark("object_turning")
+    support, push, contact = turning.bottom_supports(0.5, 0.5)["corners"], np.array([1.0, 0.0]), np.array([-0.25, -0.15])
+    radius = {pusher: np.linalg.norm(turning.quasi_static_centre_of_rotation(support, contact, push, pusher)[0])
+              for pusher in turning.PUSHERS}
+    assert radius["sticking"] > 1.2 * radius["frictionless"]
+    with pytest.raises(ValueError, match="pusher must be one of"):
+        turning.quasi_static_centre_of_rotation(support, contact, push, "rolling")
 
 
 def test_a_cuboid_rests_on_four_contacts(small_env, load_benchmark):

@@ -85,7 +85,7 @@ def quasi_static_centre_of_rotation(support: np.ndarray, contact: np.ndarray, pu
     if pusher == "frictionless":
         target = -np.array([push[0], push[1], push_moment]) / math.hypot(1.0, push_moment)
 
-        def error(grid):  # (log radius, angle, rotation sign)
+        def error(grid):  # (log radius, angle) of the centre; the better of the two senses of rotation
             cor = np.exp(grid[:, :1]) * np.stack([np.cos(grid[:, 1]), np.sin(grid[:, 1])], axis=1)
             wrenches = [friction_wrench(support, cor, sign) for sign in (1.0, -1.0)]
             return np.min([np.linalg.norm(w / np.linalg.norm(w, axis=1, keepdims=True) - target, axis=1)
@@ -128,8 +128,8 @@ def bottom_supports(length: float, width: float, points: int = 31) -> dict[str, 
 def measure(steps: int, overrides: tuple[str, ...] = ()) -> list[dict]:
     """Pushes every box of ``BOXES`` in its own world with the scripted pusher; per box the measured kappa [rad/m],
     the end-effector's mean offset across the push [m], the object-floor contacts at the start and the
-    end-effector-object friction coefficient. ``overrides``:
-    ``PushEnvConfig`` fields (``sim.solver=mujoco``), with the training config's parser."""
+    end-effector-object friction coefficient. ``overrides``: ``PushEnvConfig`` fields (``sim.solver=mujoco``), with
+    the training config's parser."""
     from dynpush.assets_usd import EE_SHAPE
     from dynpush.policies.evaluate import yaw_of
     from dynpush.policies.scripted import ScriptedPusher, ScriptedPusherConfig

@@ -79,8 +79,9 @@ def test_turning_grows_with_the_offset_and_a_uniform_support(load_benchmark, pus
     assert kappa("uniform", 0.15) > 1.3 * kappa("corners", 0.15)
 
 
-def test_sticking_turns_less_than_a_sliding_contact(load_benchmark):
-    """Friction that holds the contact on the pusher also resists the turn."""
+def test_sticking_turns_a_square_less_than_a_sliding_contact(load_benchmark):
+    """A square on its corners pushed near the end of a face (the teacher's case): friction that holds the contact on
+    the pusher also resists the turn (not in general: on the long face of a slender box the order flips)."""
     turning = load_benchmark("object_turning")
     support, push, contact = turning.bottom_supports(0.5, 0.5)["corners"], np.array([1.0, 0.0]), np.array([-0.25, -0.15])
     radius = {pusher: np.linalg.norm(turning.quasi_static_centre_of_rotation(support, contact, push, pusher)[0])

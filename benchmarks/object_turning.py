@@ -9,9 +9,11 @@ each box from behind toward a far goal with a large yaw error, so that it pushes
 from the box's centre across the push. Quasi-static pushing (Coulomb friction where the box rests; Mason 1986)
 predicts kappa at that offset for two pushers, a frictionless point (the contact slides along the face) and one the
 contact sticks to, and two ways the box rests on the floor: on its four bottom corners (the contacts Newton generates
-for a box on a plane, counted here) and on a uniform pressure over its bottom face. The sticking contact needs the
-push force within the end-effector-object friction cone (``push_force_angle_deg`` against ``ee_object_friction``,
-the mean of the two shapes' coefficients). Prints one JSON object.
+for a box on a plane, counted here) and on a uniform pressure over its bottom face, with the weight shared equally
+or moved toward the front by the push (``pushed_load``: the push at the end-effector's measured height with the full
+sliding friction, an upper bound on the transfer). The sticking contact needs the push force within the
+end-effector-object friction cone (``push_force_angle_deg`` against ``ee_object_friction``, the mean of the two
+shapes' coefficients). Prints one JSON object.
 
     python benchmarks/object_turning.py [--steps 600] [--set sim.solver=mujoco sim.substeps=8]   # PushEnvConfig fields
 """
@@ -27,6 +29,7 @@ import torch
 
 TURN_WINDOW_DEG = 20.0  # the face stays within this angle of the push direction, as the model assumes
 TRAVEL_WINDOW_M = 1.0
+OBJECT_FLOOR_FRICTION = 0.8
 BOXES = (  # (label, full side lengths along and across the push, height) [m]
     ("square 0.5 m", (0.5, 0.5, 0.6)),
     ("square 0.3 m", (0.3, 0.3, 0.6)),
@@ -36,15 +39,34 @@ BOXES = (  # (label, full side lengths along and across the push, height) [m]
 )
 
 
-def friction_wrench(support: np.ndarray, cor: np.ndarray, sign: float) -> np.ndarray:
+def friction_wrench(support: np.ndarray, cor: np.ndarray, sign: float, load: np.ndarray | None = None) -> np.ndarray:
     """Floor friction on an object that turns about centres of rotation ``cor`` (m, 2) [m] (counter-clockwise for
-    ``sign`` +1): force (x, y) and moment about the origin, per unit of mu times the total normal load shared equally
-    by the support points ``support`` (k, 2) [m]. Returns (m, 3)."""
+    ``sign`` +1): force (x, y) and moment about the origin, per unit of mu times the total normal load, which the
+    support points ``support`` (k, 2) [m] carry in the shares ``load`` (k,) (equal shares if None). Returns (m, 3)."""
+    load = np.full(len(support), 1.0 / len(support)) if load is None else load
     offset = support[None] - cor[:, None]  # (m, k, 2)
     velocity = sign * np.stack([-offset[..., 1], offset[..., 0]], axis=-1)
-    force = -velocity / np.maximum(np.linalg.norm(velocity, axis=-1, keepdims=True), 1e-12)
+    force = -velocity / np.maximum(np.linalg.norm(velocity, axis=-1, keepdims=True), 1e-12) * load[None, :, None]
     moment = support[None, :, 0] * force[..., 1] - support[None, :, 1] * force[..., 0]
-    return np.concatenate([force.mean(1), moment.mean(1, keepdims=True)], axis=1)
+    return np.concatenate([force.sum(1), moment.sum(1, keepdims=True)], axis=1)
+
+
+def pushed_load(support: np.ndarray, push_height: float, friction: float) -> np.ndarray:
+    """Load shares (k,) of the support points (k, 2) [m] (x along the push) of an object pushed ``push_height`` [m]
+    above the floor with the full sliding friction ``friction`` times its weight: a pressure linear in x, zero behind
+    where the rear lifts, whose moment balances the push's, ``sum(load * x) = friction * push_height`` (x from the
+    support's centre); all on the front-most points where even that cannot balance it (the object tips)."""
+    x = support[:, 0] - support[:, 0].mean()
+    target = friction * push_height
+    if target >= x.max():
+        load = (x == x.max()).astype(float)
+        return load / load.sum()
+    behind, ahead = -1e6, float(x.max())  # the pressure max(0, x - zero) vanishes at ``zero``; its centroid grows with it
+    for _ in range(200):
+        zero = 0.5 * (behind + ahead)
+        load = np.maximum(x - zero, 0.0)
+        behind, ahead = (zero, ahead) if (load * x).sum() / load.sum() < target else (behind, zero)
+    return load / load.sum()
 
 
 PUSHERS = ("frictionless", "sticking")
@@ -66,9 +88,10 @@ def _grid_search(error, bounds: list[tuple[float, float]], rounds: int = 4, poin
 
 
 def quasi_static_centre_of_rotation(support: np.ndarray, contact: np.ndarray, push: np.ndarray,
-                                    pusher: str = "frictionless") -> tuple[np.ndarray | None, float]:
-    """Where an object resting on ``support`` points (k, 2) [m] turns about when a point pushes it at ``contact``
-    (2,) [m] along the unit ``push``:
+                                    pusher: str = "frictionless", load: np.ndarray | None = None
+                                    ) -> tuple[np.ndarray | None, float]:
+    """Where an object resting on ``support`` points (k, 2) [m] (load shares ``load``, equal if None) turns about
+    when a point pushes it at ``contact`` (2,) [m] along the unit ``push``:
 
     - ``frictionless``: the push force is along ``push`` and the contact may slide along the face; the centre of
       rotation is where the floor's friction wrench is opposite to the push wrench (a polar grid about the origin,
@@ -77,8 +100,8 @@ def quasi_static_centre_of_rotation(support: np.ndarray, contact: np.ndarray, pu
       through the contact across the push, where the friction wrench has no moment about the contact (a point
       pushes with a force, not a torque).
 
-    Returns the centre (None for a pure translation: a push through the origin of a support symmetric about it) and
-    the residual of the balance (0 when exact)."""
+    Returns the centre (None for a pure translation: a push through the origin of a support symmetric about it and
+    loaded symmetrically across the push) and the residual of the balance (0 when exact)."""
     push_moment = contact[0] * push[1] - contact[1] * push[0]
     if abs(push_moment) < 1e-12:
         return None, 0.0
@@ -87,7 +110,7 @@ def quasi_static_centre_of_rotation(support: np.ndarray, contact: np.ndarray, pu
 
         def error(grid):  # (log radius, angle) of the centre; the better of the two senses of rotation
             cor = np.exp(grid[:, :1]) * np.stack([np.cos(grid[:, 1]), np.sin(grid[:, 1])], axis=1)
-            wrenches = [friction_wrench(support, cor, sign) for sign in (1.0, -1.0)]
+            wrenches = [friction_wrench(support, cor, sign, load) for sign in (1.0, -1.0)]
             return np.min([np.linalg.norm(w / np.linalg.norm(w, axis=1, keepdims=True) - target, axis=1)
                            for w in wrenches], axis=0)
 
@@ -100,7 +123,7 @@ def quasi_static_centre_of_rotation(support: np.ndarray, contact: np.ndarray, pu
     def error(grid):  # the centre at contact + sinh(t) * across; the contact moves along +push for sign(t)
         along = np.sinh(grid[:, 0])
         cor = contact[None] + along[:, None] * across[None]
-        wrench = np.where(along[:, None] > 0, friction_wrench(support, cor, 1.0), friction_wrench(support, cor, -1.0))
+        wrench = np.where(along[:, None] > 0, friction_wrench(support, cor, 1.0, load), friction_wrench(support, cor, -1.0, load))
         moment_about_contact = wrench[:, 2] - (contact[0] * wrench[:, 1] - contact[1] * wrench[:, 0])
         return np.abs(moment_about_contact) / np.linalg.norm(wrench[:, :2], axis=1)
 
@@ -108,13 +131,14 @@ def quasi_static_centre_of_rotation(support: np.ndarray, contact: np.ndarray, pu
     return contact + math.sinh(t) * across, residual
 
 
-def push_force_angle_deg(support: np.ndarray, centre: np.ndarray, contact: np.ndarray, push: np.ndarray) -> float:
+def push_force_angle_deg(support: np.ndarray, centre: np.ndarray, contact: np.ndarray, push: np.ndarray,
+                         load: np.ndarray | None = None) -> float:
     """Angle [deg] between the force the pusher applies (balancing the floor's friction while the object turns
     about ``centre`` with its contact moving along ``push``) and ``push``: within the pusher-object friction cone
     (atan mu) for a sticking contact."""
     offset = contact - centre
     sign = 1.0 if (-offset[1] * push[0] + offset[0] * push[1]) > 0 else -1.0  # contact velocity along +push
-    force = -friction_wrench(support, centre[None], sign)[0, :2]
+    force = -friction_wrench(support, centre[None], sign, load)[0, :2]
     return math.degrees(math.atan2(abs(push[0] * force[1] - push[1] * force[0]), force @ push))
 
 
@@ -127,8 +151,8 @@ def bottom_supports(length: float, width: float, points: int = 31) -> dict[str, 
 
 def measure(steps: int, overrides: tuple[str, ...] = ()) -> list[dict]:
     """Pushes every box of ``BOXES`` in its own world with the scripted pusher; per box the measured kappa [rad/m],
-    the end-effector's mean offset across the push [m], the object-floor contacts at the start and the
-    end-effector-object friction coefficient. ``overrides``: ``PushEnvConfig`` fields (``sim.solver=mujoco``), with
+    the end-effector's mean offset across the push and height above the floor while touching [m], the object-floor
+    contacts at the start and the end-effector-object friction coefficient. ``overrides``: ``PushEnvConfig`` fields (``sim.solver=mujoco``), with
     the training config's parser."""
     from dynpush.assets_usd import EE_SHAPE
     from dynpush.policies.evaluate import yaw_of
@@ -142,7 +166,8 @@ def measure(steps: int, overrides: tuple[str, ...] = ()) -> list[dict]:
     env_cfg = apply_overrides(PushEnvConfig(num_envs=n, seed=0, noise=ObservationNoiseConfig(enabled=False)), overrides)
     env = PushEnv(env_cfg)
     # A goal 3 m ahead with 1.2 rad to turn: the pusher holds its largest offset, to the right of the push (+x).
-    env.set_episodes({w: EpisodeSpec(dims=dims, mass=5.0, friction=0.8, goal=(3.0, 0.0, 1.2), base=(-1.6, 0.0, 0.0))
+    env.set_episodes({w: EpisodeSpec(dims=dims, mass=5.0, friction=OBJECT_FLOOR_FRICTION, goal=(3.0, 0.0, 1.2),
+                                     base=(-1.6, 0.0, 0.0))
                       for w, (_, dims) in enumerate(BOXES)})
     pusher = ScriptedPusher(env, ScriptedPusherConfig())
     floor_contacts = object_floor_contacts(env)
@@ -150,7 +175,7 @@ def measure(steps: int, overrides: tuple[str, ...] = ()) -> list[dict]:
     mu, world = model.shape_material_mu.numpy(), model.shape_world.numpy()
     ee_mu = {int(world[i]): float(mu[i]) for i, label in enumerate(model.shape_label) if label.endswith(EE_SHAPE)}
     start_yaw = np.full(n, np.nan)
-    turned, travelled, offset_sum, contact_steps = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
+    turned, travelled, offset_sum, height_sum, contact_steps = (np.zeros(n) for _ in range(5))
     previous = pusher.probe.object()[:, :2].copy()
     for _ in range(steps):
         env.step(torch.from_numpy(pusher(None)))
@@ -162,14 +187,17 @@ def measure(steps: int, overrides: tuple[str, ...] = ()) -> list[dict]:
         travelled += open_window * np.linalg.norm(obj[:, :2] - previous, axis=1)
         turned = np.where(open_window, yaw_of(obj[:, 3:]) - start_yaw, turned)
         in_contact = open_window & touching
-        offset_sum += in_contact * (pusher.probe.ee_position()[:, 1] - obj[:, 1])
+        ee = pusher.probe.ee_position()
+        offset_sum += in_contact * (ee[:, 1] - obj[:, 1])
+        height_sum += in_contact * ee[:, 2]
         contact_steps += in_contact
         previous = obj[:, :2].copy()
     return [{"box": label, "dims_m": list(dims), "object_floor_contacts": int(floor_contacts[w]),
              "ee_object_friction": 0.5 * (ee_mu[w] + float(mu[env.scene.object_shape[w]])),
              "measured_kappa_rad_per_m": float(abs(turned[w]) / max(travelled[w], 1e-9)),
              "turned_deg": float(math.degrees(turned[w])), "travelled_m": float(travelled[w]),
-             "ee_offset_across_push_m": float(offset_sum[w] / max(contact_steps[w], 1))}
+             "ee_offset_across_push_m": float(offset_sum[w] / max(contact_steps[w], 1)),
+             "ee_height_m": float(height_sum[w] / max(contact_steps[w], 1))}
             for w, (label, dims) in enumerate(BOXES)]
 
 
@@ -193,13 +221,16 @@ def run(steps: int, overrides: tuple[str, ...] = ()) -> dict:
         length, width, _ = row["dims_m"]
         contact, push = np.array([-length / 2, row["ee_offset_across_push_m"]]), np.array([1.0, 0.0])
         for support_name, support in bottom_supports(length, width).items():
+            loads = {"equal": None, "pushed": pushed_load(support, row["ee_height_m"], OBJECT_FLOOR_FRICTION)}
             for pusher in PUSHERS:
-                centre, residual = quasi_static_centre_of_rotation(support, contact, push, pusher)
-                kappa = 0.0 if centre is None else 1.0 / float(np.linalg.norm(centre))  # |omega| / |omega x centre|
-                row[f"model_{pusher}_{support_name}"] = {
-                    "kappa_rad_per_m": kappa, "measured_over_model": row["measured_kappa_rad_per_m"] / kappa if kappa else None,
-                    "push_force_angle_deg": None if centre is None else push_force_angle_deg(support, centre, contact, push),
-                    "residual": residual}
+                for load_name, load in loads.items():
+                    centre, residual = quasi_static_centre_of_rotation(support, contact, push, pusher, load)
+                    kappa = 0.0 if centre is None else 1.0 / float(np.linalg.norm(centre))  # |omega| / |omega x centre|
+                    row[f"model_{pusher}_{support_name}_{load_name}_load"] = {
+                        "kappa_rad_per_m": kappa,
+                        "measured_over_model": row["measured_kappa_rad_per_m"] / kappa if kappa else None,
+                        "push_force_angle_deg": None if centre is None else push_force_angle_deg(support, centre, contact, push, load),
+                        "residual": residual}
     return {"turn_window_deg": TURN_WINDOW_DEG, "travel_window_m": TRAVEL_WINDOW_M, "steps": steps,
             "overrides": list(overrides), "boxes": rows}
 

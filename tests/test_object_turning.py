@@ -9,16 +9,18 @@ import pytest
 from dynpush.sim.episode import EpisodeSpec
 
 
-def coulomb_wrench(support, centre, sign):
+def coulomb_wrench(support, centre, sign, load=None):
     """Independent reference, point by point: force and moment about the origin of unit-load Coulomb friction at
-    each support point of an object turning about ``centre`` (counter-clockwise for sign +1)."""
+    each support point of an object turning about ``centre`` (counter-clockwise for sign +1), the points carrying
+    the shares ``load`` (equal if None)."""
     total = np.zeros(3)
-    for x, y in support:
+    for k, (x, y) in enumerate(support):
         vx, vy = -sign * (y - centre[1]), sign * (x - centre[0])
         speed = math.hypot(vx, vy)
-        fx, fy = -vx / speed, -vy / speed
+        share = 1.0 / len(support) if load is None else load[k]
+        fx, fy = -share * vx / speed, -share * vy / speed
         total += [fx, fy, x * fy - y * fx]
-    return total / len(support)
+    return total
 
 
 @pytest.mark.parametrize("support_model", ["corners", "uniform"])
@@ -96,3 +98,39 @@ def test_a_cuboid_rests_on_four_contacts(small_env, load_benchmark):
     model assumes."""
     small_env.set_episodes({w: EpisodeSpec(dims=(0.5, 0.4 + 0.1 * w, 0.6)) for w in range(small_env.num_envs)})
     assert load_benchmark("object_turning").object_floor_contacts(small_env).tolist() == [4] * small_env.num_envs
+
+
+def test_pushed_load_balances_the_push_moment(load_benchmark):
+    """The push ``h`` above the floor with friction ``mu`` times the weight moves weight to the front: shares sum to
+    1 and their moment about the centre along the push is mu h (corners: the front pair carries 1/2 + mu h / L);
+    beyond what a linear pressure can balance the rear lifts, and beyond L / 2 all rests on the front."""
+    turning = load_benchmark("object_turning")
+    supports = turning.bottom_supports(0.5, 0.4, points=21)
+    for support in supports.values():
+        load = turning.pushed_load(support, push_height=0.18, friction=0.8)
+        assert load.sum() == pytest.approx(1.0)
+        assert (load * support[:, 0]).sum() == pytest.approx(0.8 * 0.18)
+    corners = supports["corners"]
+    front = turning.pushed_load(corners, 0.18, 0.8)[corners[:, 0] > 0].sum()
+    assert front == pytest.approx(0.5 + 0.8 * 0.18 / 0.5)
+    tipping = turning.pushed_load(corners, 0.5, 1.0)
+    assert tipping[corners[:, 0] < 0].tolist() == [0.0, 0.0] and tipping.sum() == pytest.approx(1.0)
+    uniform = supports["uniform"]  # 0.144 m is beyond the L / 6 of a linear pressure: only a front strip carries it
+    lifted = turning.pushed_load(uniform, 0.18, 0.8)
+    assert lifted[uniform[:, 0] < -0.1].max() == 0.0 and lifted[uniform[:, 0] > 0.2].min() > 0.0
+
+
+def test_loaded_wrench_and_centre(load_benchmark):
+    """With unequal shares the wrench is the load-weighted sum (independent reference), and the sticking balance
+    still holds about the contact; moving weight to the front corners slows a square's turn."""
+    turning = load_benchmark("object_turning")
+    corners, push, contact = turning.bottom_supports(0.5, 0.5)["corners"], np.array([1.0, 0.0]), np.array([-0.25, -0.15])
+    load = turning.pushed_load(corners, 0.18, 0.8)
+    centre = np.array([-0.25, 0.6])
+    assert turning.friction_wrench(corners, centre[None], 1.0, load)[0] == pytest.approx(coulomb_wrench(corners, centre, 1.0, load))
+    loaded, residual = turning.quasi_static_centre_of_rotation(corners, contact, push, "sticking", load)
+    assert residual < 1e-6
+    friction = coulomb_wrench(corners, loaded, 1.0 if loaded[1] > contact[1] else -1.0, load)
+    assert friction[2] - (contact[0] * friction[1] - contact[1] * friction[0]) == pytest.approx(0.0, abs=1e-6)
+    equal, _ = turning.quasi_static_centre_of_rotation(corners, contact, push, "sticking")
+    assert np.linalg.norm(loaded) > 1.2 * np.linalg.norm(equal)

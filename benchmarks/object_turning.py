@@ -39,13 +39,14 @@ BOXES = (  # (label, full side lengths along and across the push, height) [m]
 )
 
 
-def friction_wrench(support: np.ndarray, cor: np.ndarray, sign: float, load: np.ndarray | None = None) -> np.ndarray:
+def friction_wrench(support: np.ndarray, cor: np.ndarray, sign: float | np.ndarray,
+                    load: np.ndarray | None = None) -> np.ndarray:
     """Floor friction on an object that turns about centres of rotation ``cor`` (m, 2) [m] (counter-clockwise for
-    ``sign`` +1): force (x, y) and moment about the origin, per unit of mu times the total normal load, which the
+    ``sign`` +1; one sign for all centres or one per centre, (m,)): force (x, y) and moment about the origin, per unit of mu times the total normal load, which the
     support points ``support`` (k, 2) [m] carry in the shares ``load`` (k,) (equal shares if None). Returns (m, 3)."""
     load = np.full(len(support), 1.0 / len(support)) if load is None else load
     offset = support[None] - cor[:, None]  # (m, k, 2)
-    velocity = sign * np.stack([-offset[..., 1], offset[..., 0]], axis=-1)
+    velocity = np.reshape(sign, (-1, 1, 1)) * np.stack([-offset[..., 1], offset[..., 0]], axis=-1)
     force = -velocity / np.maximum(np.linalg.norm(velocity, axis=-1, keepdims=True), 1e-12) * load[None, :, None]
     moment = support[None, :, 0] * force[..., 1] - support[None, :, 1] * force[..., 0]
     return np.concatenate([force.sum(1), moment.sum(1, keepdims=True)], axis=1)
@@ -123,7 +124,7 @@ def quasi_static_centre_of_rotation(support: np.ndarray, contact: np.ndarray, pu
     def error(grid):  # the centre at contact + sinh(t) * across; the contact moves along +push for sign(t)
         along = np.sinh(grid[:, 0])
         cor = contact[None] + along[:, None] * across[None]
-        wrench = np.where(along[:, None] > 0, friction_wrench(support, cor, 1.0, load), friction_wrench(support, cor, -1.0, load))
+        wrench = friction_wrench(support, cor, np.where(along > 0, 1.0, -1.0), load)
         moment_about_contact = wrench[:, 2] - (contact[0] * wrench[:, 1] - contact[1] * wrench[:, 0])
         return np.abs(moment_about_contact) / np.linalg.norm(wrench[:, :2], axis=1)
 
@@ -152,9 +153,9 @@ def bottom_supports(length: float, width: float, points: int = 31) -> dict[str, 
 def measure(steps: int, overrides: tuple[str, ...] = ()) -> list[dict]:
     """Pushes every box of ``BOXES`` in its own world with the scripted pusher; per box the measured kappa [rad/m],
     the end-effector's mean offset across the push and height above the floor while touching [m], the object-floor
-    contacts at the start and the end-effector-object friction coefficient. ``overrides``: ``PushEnvConfig`` fields (``sim.solver=mujoco``), with
-    the training config's parser."""
-    from dynpush.assets_usd import EE_SHAPE
+    contacts at the start and the end-effector-object friction coefficient. ``overrides``: ``PushEnvConfig`` fields
+    (``sim.solver=mujoco``), with the training config's parser."""
+    from dynpush.kernels.contacts import ROLE_EE
     from dynpush.policies.evaluate import yaw_of
     from dynpush.policies.scripted import ScriptedPusher, ScriptedPusherConfig
     from dynpush.policies.train import apply_overrides
@@ -173,7 +174,8 @@ def measure(steps: int, overrides: tuple[str, ...] = ()) -> list[dict]:
     floor_contacts = object_floor_contacts(env)
     model = env.scene.model
     mu, world = model.shape_material_mu.numpy(), model.shape_world.numpy()
-    ee_mu = {int(world[i]): float(mu[i]) for i, label in enumerate(model.shape_label) if label.endswith(EE_SHAPE)}
+    ee_shapes = np.flatnonzero(env.scene.shape_role == ROLE_EE)
+    ee_mu = dict(zip(world[ee_shapes].tolist(), mu[ee_shapes].tolist()))
     start_yaw = np.full(n, np.nan)
     turned, travelled, offset_sum, height_sum, contact_steps = (np.zeros(n) for _ in range(5))
     previous = pusher.probe.object()[:, :2].copy()

@@ -12,7 +12,16 @@ where ``c > 0``) and names their column groups in ``env.constraint_groups``. Eve
 
 ``delta`` is a soft termination: the stored reward becomes ``r * (1 - delta)`` and GAE discounts with
 ``gamma * (1 - delta_t)`` on top of the environment's dones. rsl_rl's storage keeps dones as bytes, so ``delta`` has
-its own float buffer (:attr:`CaTPPO.deltas`). Everything else (models, storage, update, normalisation) is rsl_rl's.
+its own float buffer (:attr:`CaTPPO.deltas`).
+
+With ``returns_per_step`` (the default) PPO stores every reward multiplied by ``1 - gamma``, so that the critic learns
+values in units of reward per step (a discounted average of the rewards to come) instead of discounted sums. The task's
+rewards are a few per step; their discounted sums reach ``r / (1 - gamma)``, about 2000 at gamma 0.998, while rsl_rl's
+value loss clips every update of a value to ``clip_param`` (0.2) around the value it had: a critic that starts at 0
+then needs hundreds of iterations to reach the scale of the returns and, until it has, discounts whatever ends an
+episode or a CaT termination as if the future were worth a few per cent of its worth. In reward-per-step units the
+same clip is 0.2 of a reward. The actor's loss is unchanged (advantages are normalised), and the logged rewards stay
+the environment's. Everything else (models, storage, update, normalisation) is rsl_rl's.
 """
 
 from __future__ import annotations
@@ -40,6 +49,7 @@ class CaTPPO(PPO):
         constraint_groups: Sequence[tuple[str, int]],
         tau: float = 0.95,
         c_max_floor: float = 1e-6,
+        returns_per_step: bool = True,
         **kwargs,
     ) -> None:
         """Initialize PPO and the CaT state.
@@ -51,12 +61,15 @@ class CaTPPO(PPO):
             constraint_groups: ``(name, dim)`` per constraint group, in column order of ``extras["constraints"]``.
             tau: Polyak factor of the running maximum violation ``c_max`` (CaT paper: 0.95).
             c_max_floor: Lower bound of the per-column batch maximum, keeps ``c / c_max`` finite (CaT paper: 1e-6).
+            returns_per_step: Store rewards multiplied by ``1 - gamma`` (values in reward-per-step units).
             **kwargs: Arguments of :class:`rsl_rl.algorithms.PPO`.
         """
         super().__init__(actor, critic, storage, **kwargs)
         self.constraint_groups = [(str(name), int(dim)) for name, dim in constraint_groups]
         self.tau = tau
         self.c_max_floor = c_max_floor
+        self.reward_scale = 1.0 - self.gamma if returns_per_step else 1.0
+        """Factor of the rewards PPO stores and learns values of (``1 - gamma`` with ``returns_per_step``)."""
 
         num_constraints = sum(dim for _, dim in self.constraint_groups)
         self.c_max = torch.zeros(num_constraints, device=self.device)
@@ -108,15 +121,15 @@ class CaTPPO(PPO):
     ) -> None:
         """Record one environment step with its termination probability.
 
-        The stored reward, rsl_rl's time-out bootstrap ``gamma * V`` included, is scaled by ``1 - delta``: a
-        terminated transition has no continuation value either. CaT statistics of the step are added to the
+        The stored reward is the environment's times :attr:`reward_scale`; it is then, rsl_rl's time-out bootstrap
+        ``gamma * V`` included, scaled by ``1 - delta``: a terminated transition has no continuation value either. CaT statistics of the step are added to the
         extras dict that rsl_rl's logger averages over the iteration (``"episode"`` if present, else ``"log"``).
         """
         constraints = extras["constraints"].to(self.device, torch.float)
         delta = self.termination_probability(constraints)
         step = self.storage.step
         self.deltas[step].copy_(delta.unsqueeze(1))
-        super().process_env_step(obs, rewards, dones, extras)
+        super().process_env_step(obs, rewards * self.reward_scale, dones, extras)
         self.storage.rewards[step].mul_(1.0 - self.deltas[step])
 
         log_key = "episode" if "episode" in extras else "log"

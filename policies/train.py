@@ -52,6 +52,9 @@ class PPOConfig:
     max_grad_norm: float = 1.0
     schedule: str = "adaptive"
     desired_kl: float = 0.01
+    # Ours: the critic learns values in reward-per-step units (rewards stored times 1 - gamma), which keeps the
+    # returns within reach of rsl_rl's value clip (policies/cat_ppo.py).
+    returns_per_step: bool = True
 
 
 @dataclass
@@ -61,6 +64,10 @@ class NetworkConfig:
     actor_hidden: tuple[int, ...] = (256, 128, 64)
     critic_hidden: tuple[int, ...] = (256, 128, 64)
     init_noise_std: float = 1.0
+    # Whether the actor's observation normaliser keeps its statistics (ours). None: held in a run that starts from
+    # another policy (--init-from), whose weights were fitted to those statistics; re-normalising the inputs under
+    # them changes what the actor does before any update (docs/ppo_fine_tuning.md). Fixed when the run is created.
+    hold_actor_normalizer: bool | None = None
 
 
 @dataclass
@@ -320,6 +327,8 @@ def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool 
 
         onnx_actor = build_actor(cfg)
         load_onnx_actor(onnx_actor, init_from)
+    if cfg.network.hold_actor_normalizer is None:
+        cfg.network.hold_actor_normalizer = init_from is not None
     if group.rank == 0:
         run_dir.mkdir(parents=True, exist_ok=True)
         config_path.write_text(json.dumps(cfg.to_dict(), indent=2))
@@ -342,6 +351,8 @@ def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool 
     elif init_from is not None:
         runner.load(str(init_from), load_cfg={"actor": True, "critic": True}, restore_env=False)
         set_action_std(runner.alg.actor, cfg.network.init_noise_std)
+    if cfg.network.hold_actor_normalizer:
+        hold_normalizer(runner.alg.actor)
     remaining = cfg.iterations - runner.current_learning_iteration
     if remaining <= 0:
         print(f"{run_dir}: all {cfg.iterations} iterations done")
@@ -396,6 +407,12 @@ def set_action_std(actor: torch.nn.Module, std: float) -> None:
     distribution is rsl_rl's with a scalar std parameter (``rsl_rl_runner_cfg``)."""
     with torch.no_grad():
         actor.distribution.std_param.fill_(std)
+
+
+def hold_normalizer(model: torch.nn.Module) -> None:
+    """Stops the updates of ``model``'s empirical observation normaliser (rsl_rl's ``until`` count), so its
+    statistics stay those it has now."""
+    model.obs_normalizer.until = 0
 
 
 def record_launch(run_dir: Path, command: str | None, procs: int, resume: bool, init_from: Path | None = None) -> None:

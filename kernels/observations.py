@@ -11,6 +11,13 @@ Critic (73, noiseless): the 54 above without noise, then ``ee_object_contact`` (
 ``object_inertia`` (3, principal), ``object_linear_velocity_b`` (3), ``object_angular_velocity_b``
 (3), ``object_shape_one_hot`` (2: cuboid, cylinder). Velocities of the object are those of its frame
 origin (the centroid), expressed in the base frame.
+
+The critic's input (``CRITIC_INPUT_TERMS``, 62) is that buffer without ``last_actions`` (ours; the paper's critic
+sees all of ``o_t``). The previous action is the sampled one, exploration noise included: a critic that reads it
+learns to use it as a stand-in for the state (on the policy's own data the action mean is a function of the state),
+gives the noise the same weight, and so credits every action with the value it would predict for a state in which
+that action were the mean. The advantage then pushes the actor along the critic's weights instead of along the
+return, whatever the reward; without that input the same fine-tune keeps its success (docs/ppo_fine_tuning.md).
 """
 
 import warp as wp
@@ -34,6 +41,17 @@ PRIVILEGED_TERMS = (
     ("object_angular_velocity_b", 3),
     ("object_shape_one_hot", 2),
 )
+CRITIC_INPUT_TERMS = tuple(term for term in POLICY_TERMS + PRIVILEGED_TERMS if term[0] != "last_actions")
+
+
+def critic_input_columns() -> list[int]:
+    """Columns of the critic observation buffer (policy terms, then privileged terms) that the critic reads."""
+    columns, start = [], 0
+    for name, size in POLICY_TERMS + PRIVILEGED_TERMS:
+        if (name, size) in CRITIC_INPUT_TERMS:
+            columns.extend(range(start, start + size))
+        start += size
+    return columns
 
 
 @wp.func

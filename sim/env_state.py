@@ -52,15 +52,18 @@ class EnvBase:
     policy_obs_t: torch.Tensor
     critic_obs_t: torch.Tensor
     num_envs: int
+    critic_input_columns: torch.Tensor | None = None
+    """Columns of ``critic_obs_t`` the critic reads (None: all of them)."""
 
     def get_observations(self) -> TensorDict:
-        """Copies of the observation buffers.
+        """Copies of the observation buffers: the actor's, and the critic's input columns.
 
         The Warp buffers are zero-copy torch views that the next step overwrites in place; rsl_rl keeps
         a reference to the observation it acted on until the step is stored, so it gets a copy.
         """
-        return TensorDict({"policy": self.policy_obs_t.clone(), "critic": self.critic_obs_t.clone()},
-                          batch_size=[self.num_envs])
+        critic = (self.critic_obs_t.clone() if self.critic_input_columns is None
+                  else self.critic_obs_t.index_select(1, self.critic_input_columns))
+        return TensorDict({"policy": self.policy_obs_t.clone(), "critic": critic}, batch_size=[self.num_envs])
 
     def set_reward_weight(self, name: str, value: float) -> None:
         """Changes one reward weight (a name of ``reward_names``)."""

@@ -187,6 +187,7 @@ class PushEnv(EnvBase, VecEnv):
         self.actions_t = t(self.raw_actions)
         self.policy_obs_t = t(self.policy_obs)
         self.critic_obs_t = t(self.critic_obs)
+        self.critic_input_columns = torch.tensor(observations_k.critic_input_columns(), device=self.critic_obs_t.device)
         self.reward_t = t(self.reward)
         self.reward_terms_t = t(self.reward_terms)
         self.reset_t = t(self.reset_flags)

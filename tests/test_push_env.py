@@ -14,7 +14,7 @@ from dynpush.sim.push_env import PushEnv
 def test_vecenv_interface_and_zero_copy(small_env):
     env = small_env
     obs = env.reset()
-    assert obs["policy"].shape == (4, 54) and obs["critic"].shape == (4, 73)
+    assert obs["policy"].shape == (4, 54) and obs["critic"].shape == (4, 62)
     assert obs["policy"].dtype == torch.float32
     obs, reward, dones, extras = env.step(torch.zeros(4, 11))
     assert reward.shape == (4,) and dones.shape == (4,)
@@ -27,8 +27,23 @@ def test_vecenv_interface_and_zero_copy(small_env):
     before = obs["policy"].clone()
     env.step(torch.ones(4, 11))
     assert torch.equal(obs["policy"], before)
-    # critic = noiseless policy terms + privileged terms: noise makes them differ, but only by the table's widths
-    assert (obs["policy"] - obs["critic"][:, :54]).abs().max() <= 0.5 + 1e-6
+    # critic = noiseless policy terms (without the last actions) + privileged terms: noise makes them differ, but
+    # only by the table's widths
+    assert (obs["policy"][:, :43] - obs["critic"][:, :43]).abs().max() <= 0.5 + 1e-6
+
+
+def test_the_critic_reads_no_sampled_action(small_env):
+    """Regression: the critic's input holds every critic term but the previous (sampled) action, whose noise a
+    critic otherwise credits with the value of a state (kernels/observations.py); the actor still reads it."""
+    env = small_env
+    env.reset()
+    actions = torch.linspace(-0.9, 0.9, 44).reshape(4, 11)  # distinct, within every clip
+    obs, _, _, _ = env.step(actions)
+    assert torch.equal(obs["policy"][:, 43:54], actions)
+    columns = [c for c in range(73) if c not in range(43, 54)]
+    assert torch.equal(obs["critic"], env.critic_obs_t[:, columns])
+    for a in actions.flatten():
+        assert not (obs["critic"] == a).any(), "a sampled action reached the critic's input"
 
 
 def test_time_out_resets_and_reports(tmp_path):
@@ -71,7 +86,7 @@ def test_contacts_end_effector_and_base_collision(small_env):
     ee_contact, collisions = np.zeros(4, bool), np.zeros((4, 18), bool)
     for _ in range(150):
         obs, _, _, extras = env.step(actions)
-        ee_contact |= obs["critic"][:, 54].numpy() > 0.5
+        ee_contact |= env.critic_obs_t[:, 54].numpy() > 0.5
         collisions |= extras["constraints"][:, 43:61].numpy() > 0.5
     assert ee_contact[0] and not collisions[0].any(), "the end-effector reaches the object first, without collisions"
     assert collisions[1, :9].any(), "driving into the object with the arm up hits the base or a leg"
@@ -132,7 +147,7 @@ def test_set_goals_keeps_the_bodies_and_restarts_the_clock(small_env):
     obs = env.set_goals({1: (0.0, 0.0, 0.0)})  # the object, at rest at the origin, meets this goal
     np.testing.assert_array_equal(env.state_0.body_q.numpy(), bodies)
     assert env.episode_length_buf.tolist() == [5, 0, 5, 5]
-    np.testing.assert_allclose(obs["critic"][1, 31:34].numpy(), 0.0, atol=0.01)  # object-to-goal in the base frame
+    np.testing.assert_allclose(env.critic_obs_t[1, 31:34].numpy(), 0.0, atol=0.01)  # object-to-goal in the base frame
     env.step(torch.zeros(4, 11))
     assert env.success_t.tolist()[1] == 1
     with pytest.raises(ConfigError, match="goal of world 0"):

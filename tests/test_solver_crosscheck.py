@@ -21,7 +21,7 @@ def test_both_solvers_push_the_box_forward(solver):
     contact = np.zeros(2, bool)
     for _ in range(200):
         obs, _, _, _ = env.step(actions)
-        contact |= obs["critic"][:, 54].numpy() > 0.5
+        contact |= env.critic_obs_t[:, 54].numpy() > 0.5
     moved = env.state_0.body_q.numpy()[env.scene.object_body, :3] - start[:, :3]
     print(f"{solver}: box moved {moved[0]} m")
     assert contact.tolist() == [True, False]

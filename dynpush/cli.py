@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
+import time
 from pathlib import Path
 
 
@@ -34,16 +35,12 @@ def _env_info(args: argparse.Namespace) -> int:
 
 def _train(args: argparse.Namespace) -> int:
     from dynpush.policies.locomotion_train import LocomotionTrainConfig
-    from dynpush.policies.train import TrainConfig, apply_overrides, launch_processes, train
+    from dynpush.policies.train import TrainConfig, apply_overrides, launch_processes, run_config, train
     from dynpush.sim.config import ConfigError
 
+    started = args.launched_at or time.time()  # --hours counts from the user's launch
     argv = args.argv[args.argv.index("train") + 1 :]
     command = args.launched_as or shlex.join(["dynpush", "train", *argv])  # recorded in the run's launches.jsonl
-    if args.procs > 1:  # re-run this command under torchrun, one process per shard
-        drop = [i for i, a in enumerate(argv) if a == "--procs" or a.startswith("--procs=")]
-        for i in reversed(drop):
-            del argv[i : i + (1 if "=" in argv[i] else 2)]
-        return launch_processes(args.procs, [*argv, "--launched-as", command])
     config_class = {"push": TrainConfig, "locomotion": LocomotionTrainConfig}[args.task]
     cfg = apply_overrides(config_class.preset_config(args.preset), args.set or [])
     name = args.name or (args.preset if args.task == "push" else f"{args.task}_{args.preset}")
@@ -55,8 +52,17 @@ def _train(args: argparse.Namespace) -> int:
         extend_to = cfg.iterations
     if args.init_from and args.resume:
         raise ConfigError("--init-from starts a new run; --resume continues one: give one of them")
-    train(cfg, Path(args.runs) / name, resume=args.resume, command=command, extend_to=extend_to,
-          init_from=Path(args.init_from) if args.init_from else None)
+    if args.hours is not None and not args.hours > 0:
+        raise ConfigError(f"--hours must be > 0, got {args.hours!r}")
+    run_dir = Path(args.runs) / name
+    if args.procs > 1:  # re-run this command under torchrun, one process per shard
+        run_config(cfg, run_dir, args.resume, extend_to)  # what every rank would refuse, refused here in one line
+        drop = [i for i, a in enumerate(argv) if a == "--procs" or a.startswith("--procs=")]
+        for i in reversed(drop):
+            del argv[i : i + (1 if "=" in argv[i] else 2)]
+        return launch_processes(args.procs, [*argv, "--launched-as", command, "--launched-at", repr(started)])
+    train(cfg, run_dir, resume=args.resume, command=command, extend_to=extend_to,
+          init_from=Path(args.init_from) if args.init_from else None, hours=args.hours, started=started)
     return 0
 
 
@@ -97,7 +103,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--procs", type=int, default=1,
                    help="processes on this machine (torchrun, gloo on CPU / NCCL on GPUs); env.num_envs is split")
     p.add_argument("--set", nargs="*", metavar="FIELD=VALUE", help="override config fields, e.g. env.num_envs=256 iterations=100")
+    p.add_argument("--hours", type=float, default=None, metavar="H",
+                   help="stop at the last iteration boundary before H hours of this launch, with a checkpoint that"
+                        " --resume continues")
     p.add_argument("--launched-as", default=None, help=argparse.SUPPRESS)  # the user's command, from a --procs relaunch
+    p.add_argument("--launched-at", type=float, default=None, help=argparse.SUPPRESS)  # time.time() of that command
     p.set_defaults(func=_train)
 
     p = sub.add_parser("imitate", help="DAgger from the scripted pusher into a run's actor (runs/NAME/imitation.pt);"
@@ -128,15 +138,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from dynpush.sim.config import ConfigError
+    """Runs one subcommand; a user error (:class:`dynpush.errors.UserError`) ends with one line on stderr and exit
+    status 2, like argparse's own usage errors. Other exceptions are bugs and keep their traceback."""
+    from dynpush.errors import UserError
 
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
     args.argv = argv
     try:
         return args.func(args)
-    except ConfigError as error:
-        print(f"dynpush: invalid configuration: {error}", file=sys.stderr)
+    except UserError as error:
+        print(f"dynpush: {' '.join(str(error).split())}", file=sys.stderr)  # one line, even for a listing message
         return 2
 
 

@@ -48,9 +48,10 @@ import dataclasses
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import torch
@@ -65,6 +66,9 @@ from dynpush.sim.episode import SHAPES
 from dynpush.sim.push_env import PushEnv, make_push_env
 
 from .export import OnnxPolicy
+
+if TYPE_CHECKING:
+    from rsl_rl.models import MLPModel
 
 # Paper Table I (success rate %, toppled object rate %), keyed by
 # (reach target sampled on the object surface, object balance constraint on).
@@ -199,6 +203,23 @@ class EnvProbe:
 
 
 # ---------------------------------------------------------------------------------------------- rollout
+Policy = Callable[[np.ndarray], np.ndarray]
+"""Actions [B, 11] (float32) for actor observations [B, 54] (float32): an :class:`OnnxPolicy` or an :class:`ActorPolicy`."""
+
+
+class ActorPolicy:
+    """The deterministic mean of an in-memory actor (rsl_rl ``MLPModel``), so that training evaluates its current actor
+    as ``dynpush eval`` evaluates an exported one: a copy of its observation normaliser and MLP (rsl_rl's export
+    module, the graph ``dynpush export`` writes to ONNX), on the CPU, which later updates of the actor leave alone."""
+
+    def __init__(self, actor: MLPModel):
+        self.module = actor.as_jit().to("cpu").eval()
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return self.module(torch.from_numpy(obs)).numpy()
+
+
 class StepObserver(Protocol):
     """Receives every control step of a first-episode rollout."""
 
@@ -229,7 +250,7 @@ class FirstEpisodes:
                                 for f in dataclasses.fields(FirstEpisodes)})
 
 
-def run_first_episodes(env: PushEnv, policy: OnnxPolicy, observers: list[StepObserver] = (),
+def run_first_episodes(env: PushEnv, policy: Policy, observers: list[StepObserver] = (),
                        progress: tqdm | None = None, started: bool = False) -> FirstEpisodes:
     """Resets all worlds together and runs the policy for one episode length; see the module docstring.
 
@@ -283,6 +304,16 @@ class ConstraintObserver:
         averaged over episodes; ``violated_steps`` (episodes, groups) counts, ``length`` (episodes,) steps."""
         violation = 100.0 * (violated_steps / length[:, None]).mean(axis=0)
         return {name: float(v) for (name, _), v in zip(CONSTRAINT_GROUPS, violation)}
+
+
+def first_episode_rates(env: PushEnv, policy: Policy) -> dict:
+    """Tables I and II of every world's first episode in ``env``, as ``eval.json`` reports them: success and toppled
+    rate [% of episodes] and, per constraint group, the time it is violated [% of an episode, mean over episodes]."""
+    constraints = ConstraintObserver(env)
+    episodes = run_first_episodes(env, policy, [constraints])
+    return {"success_rate": _percent(episodes.success), "toppled_rate": _percent(episodes.toppled),
+            "constraint_violation_percent": ConstraintObserver.percent_of_time(constraints.violated.cpu().numpy(),
+                                                                               episodes.length)}
 
 
 class ContactHeightObserver:

@@ -28,6 +28,7 @@ import numpy as np
 import onnx
 import onnxruntime
 
+from dynpush.errors import CorruptFileError, MissingFileError
 from dynpush.runtime.contract import INPUT_NAME, OUTPUT_NAME, ContractError, PolicyContract
 from dynpush.runtime.observation import NUM_ACTIONS, NUM_ARM_JOINTS, POLICY_OBSERVATION_SIZE
 from dynpush.sim.config import ConfigError
@@ -47,6 +48,19 @@ def config_sha256(config: dict) -> str:
     return hashlib.sha256(json.dumps(config, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
 
 
+def read_json(path: Path) -> dict:
+    """The JSON object in ``path``; a MissingFileError or CorruptFileError naming the file otherwise."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise MissingFileError(f"{path} not found") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise CorruptFileError(f"{path} is not readable JSON: {error}") from error
+    if not isinstance(data, dict):
+        raise CorruptFileError(f"{path} holds a JSON {type(data).__name__}, not an object")
+    return data
+
+
 def load_run_config(run_dir: Path) -> TrainConfig | LocomotionTrainConfig:
     """The training config of a run folder (its ``config.json``): a locomotion run's says ``"task": "locomotion"``."""
     from dynpush.policies.locomotion_train import LocomotionTrainConfig
@@ -54,19 +68,19 @@ def load_run_config(run_dir: Path) -> TrainConfig | LocomotionTrainConfig:
 
     path = Path(run_dir) / "config.json"
     if not path.exists():
-        raise FileNotFoundError(f"{path} not found: {run_dir} is not a dynpush run folder")
-    data = json.loads(path.read_text())
+        raise MissingFileError(f"{path} not found: {run_dir} is not a dynpush run folder")
+    data = read_json(path)
     return (LocomotionTrainConfig if data.get("task") == "locomotion" else TrainConfig).from_dict(data)
 
 
 def resolve_checkpoint(run_dir: Path, checkpoint: str | None) -> Path:
     """``run_dir / checkpoint``, or the run's latest ``model_K.pt`` when ``checkpoint`` is None."""
-    from dynpush.policies.train import latest_checkpoint
+    from dynpush.policies.run_folder import latest_checkpoint
 
     run_dir = Path(run_dir)
     path = latest_checkpoint(run_dir) if checkpoint is None else run_dir / checkpoint
     if path is None or not path.exists():
-        raise FileNotFoundError(f"checkpoint {checkpoint or 'model_*.pt'} not found in {run_dir}")
+        raise MissingFileError(f"checkpoint {checkpoint or 'model_*.pt'} not found in {run_dir}")
     return path
 
 
@@ -87,19 +101,17 @@ def build_actor(cfg: TrainConfig | LocomotionTrainConfig, observation_size: int 
 def load_actor(checkpoint: Path, cfg: TrainConfig | LocomotionTrainConfig, observation_size: int = POLICY_OBSERVATION_SIZE,
                num_actions: int = NUM_ACTIONS) -> MLPModel:
     """The trained actor (normaliser included) of a checkpoint, in eval mode on the CPU."""
-    import torch
+    from dynpush.policies.checkpoint_file import CheckpointError, read_checkpoint
 
-    try:
-        saved = torch.load(checkpoint, weights_only=False, map_location="cpu")
-    except Exception as error:  # a truncated or foreign file
-        raise RuntimeError(f"cannot read checkpoint {checkpoint}: {error}") from error
-    if not isinstance(saved, dict) or "actor_state_dict" not in saved:
-        raise RuntimeError(f"checkpoint {checkpoint} has no 'actor_state_dict' (not an rsl_rl checkpoint)")
+    saved = read_checkpoint(checkpoint)
+    if "actor_state_dict" not in saved:
+        raise CheckpointError(f"checkpoint {checkpoint} has no 'actor_state_dict' (not an rsl_rl checkpoint)")
     actor = build_actor(cfg, observation_size, num_actions)
     try:
         actor.load_state_dict(saved["actor_state_dict"])
     except RuntimeError as error:
-        raise RuntimeError(f"checkpoint {checkpoint} does not fit the network of the run's config.json: {error}") from error
+        raise CheckpointError(f"checkpoint {checkpoint} does not fit the network of the run's config.json: "
+                              f"{' '.join(str(error).split())}") from error
     return actor.eval()
 
 
@@ -120,7 +132,7 @@ def load_onnx_actor(actor: MLPModel, path: Path) -> None:
     from dynpush.policies.train import TrainConfig
 
     policy = OnnxPolicy(path)  # checks the contract and the input / output shapes
-    model = onnx.load(str(path))
+    model = load_onnx(path)
     weights = {tensor.name: numpy_helper.to_array(tensor) for tensor in model.graph.initializer}
     nodes = {node.op_type: node for node in reversed(model.graph.node)}  # the first node of each type
     mean, divisor = weights[nodes["Sub"].input[1]], weights[nodes["Div"].input[1]]
@@ -229,6 +241,16 @@ def write_onnx(actor: MLPModel, out: Path, metadata: dict[str, str], doc_string:
     out.with_name(out.name + ".data").unlink(missing_ok=True)  # the exporter's external weights, now stale
 
 
+def load_onnx(path: Path) -> onnx.ModelProto:
+    """The ONNX model in ``path``; a MissingFileError or CorruptFileError naming the file otherwise."""
+    if not Path(path).is_file():
+        raise MissingFileError(f"ONNX file {path} not found")
+    try:
+        return onnx.load(str(path))
+    except Exception as error:  # protobuf's DecodeError, or onnx's own errors, for a file that is no model
+        raise CorruptFileError(f"{path} is not an ONNX model: {' '.join(str(error).split())}") from error
+
+
 def read_metadata(model: onnx.ModelProto) -> dict[str, str]:
     """The ``metadata_props`` of an ONNX model as a dict."""
     return {prop.key: prop.value for prop in model.metadata_props}
@@ -278,10 +300,11 @@ class OnnxPolicy:
 
     def __init__(self, path: Path, batched: bool = False):
         self.path = Path(path)
-        if not self.path.exists():
-            raise FileNotFoundError(f"policy file {self.path} not found")
-        model = onnx.load(str(self.path))
-        self.contract = PolicyContract.from_metadata(read_metadata(model))
+        model = load_onnx(self.path)
+        try:
+            self.contract = PolicyContract.from_metadata(read_metadata(model))
+        except ContractError as error:
+            raise ContractError(f"{self.path}: {error}") from None
         self.batch_size: int | None = None if batched else 1
         if batched:
             self.session = batched_session(model, INPUT_NAME, POLICY_OBSERVATION_SIZE, OUTPUT_NAME, NUM_ACTIONS, str(self.path))

@@ -33,10 +33,14 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
+from dynpush.errors import MissingFileError
 from dynpush.sim.config import ConfigError
 
+from .checkpoint_file import read_checkpoint
+from .export import load_run_config, read_json
 from .scripted import ScriptedPusher, ScriptedPusherConfig, check_object_size
-from .train import IMITATION_CHECKPOINT, TrainConfig, record_launch, scripted_expert, sigterm_as_keyboard_interrupt
+from .run_folder import IMITATION_CHECKPOINT, record_launch
+from .train import TrainConfig, scripted_expert, sigterm_as_keyboard_interrupt
 
 
 @dataclass
@@ -151,10 +155,10 @@ def imitate(cfg: TrainConfig, imitation: ImitationConfig, run_dir: Path, resume:
     checkpoint = run_dir / IMITATION_CHECKPOINT
     if resume:
         if not data_path.exists():
-            raise FileNotFoundError(f"--resume: no {data_path}; start without --resume first")
-        cfg = TrainConfig.from_dict(json.loads(config_path.read_text()))
+            raise MissingFileError(f"--resume: no {data_path}; start without --resume first")
+        cfg = load_run_config(run_dir)
         # The data set was labelled by the run's expert: keep it (configs older than the field had the true sizes).
-        saved_imitation = json.loads((run_dir / "imitation_config.json").read_text())
+        saved_imitation = read_json(run_dir / "imitation_config.json")
         imitation = replace(imitation, expert_object_size=saved_imitation.get("expert_object_size"),
                             expert_overrides=tuple(saved_imitation.get("expert_overrides", ())))
     elif config_path.exists():
@@ -174,7 +178,7 @@ def imitate(cfg: TrainConfig, imitation: ImitationConfig, run_dir: Path, resume:
     first_round = 0
     if resume:
         runner.load(str(checkpoint), restore_env=False)
-        saved = torch.load(data_path, weights_only=False)
+        saved = read_checkpoint(data_path, map_location=None)
         dagger.load_state_dict(saved["dagger"])
         first_round = saved["rounds_done"]
 

@@ -73,8 +73,7 @@ class LocomotionTrainConfig:
         if len(self.disturbance_ramp) != 2:
             raise ConfigError(f"disturbance_ramp must be (start, end) iterations, got {self.disturbance_ramp!r}")
         DisturbanceRampConfig(*self.disturbance_ramp).validate()
-        if self.ppo.schedule not in ("adaptive", "fixed"):
-            raise ConfigError(f"ppo.schedule must be 'adaptive' or 'fixed', got {self.ppo.schedule!r}")
+        self.ppo.validate()
         return self
 
     def to_dict(self) -> dict:

@@ -15,6 +15,7 @@ import torch
 from rsl_rl.utils.logger import Logger
 from tqdm import tqdm
 
+EVALUATIONS = "evaluations.jsonl"  # a run folder's evaluations during training
 BREAK_FACTOR = 5.0  # learning curve: a gap this many times an iteration's own time is a pause between sittings
 SMOOTHING = 25  # learning curve: iterations averaged per point
 
@@ -43,8 +44,13 @@ class ProgressLogger(Logger):
 
     bar: tqdm | None = None
     run_state: dict[str, float]  # values set by the runner for this iteration (e.g. the curriculum)
+    # [s] the evaluation the runner ran at this iteration's start (TrainConfig.eval_interval): rsl_rl's rollout clock
+    # includes it, the iteration's collect time does not.
+    evaluation_s: float = 0.0
 
     def log(self, it: int, start_it: int, total_it: int, collect_time: float, learn_time: float, **kwargs) -> None:
+        evaluation_s, self.evaluation_s = self.evaluation_s, 0.0
+        collect_time -= evaluation_s
         if self.writer is None:  # non-zero ranks of a distributed run
             super().log(it, start_it, total_it, collect_time, learn_time, **kwargs)
             return
@@ -53,7 +59,8 @@ class ProgressLogger(Logger):
             self.writer.add_scalar(key.lstrip("/"), value, it)
         with contextlib.redirect_stdout(io.StringIO()):
             super().log(it, start_it, total_it, collect_time, learn_time, **kwargs)
-        record = {"iteration": it, "time": time.time(), "collect_s": collect_time, "learn_s": learn_time, **summary,
+        record = {"iteration": it, "time": time.time(), "collect_s": collect_time, "learn_s": learn_time,
+                  "eval_s": evaluation_s, **summary,
                   "action_std": float(kwargs["action_std"].detach().mean()), "learning_rate": float(kwargs["learning_rate"]),
                   **{f"loss/{key}": float(value) for key, value in kwargs["loss_dict"].items()}}
         with open(os.path.join(self.log_dir, "progress.jsonl"), "a") as f:
@@ -77,8 +84,17 @@ class ProgressLogger(Logger):
         )
         self.bar.update(1)
         if it + 1 >= total_it:
+            self.close_bar()
+
+    def close_bar(self) -> None:
+        if self.bar is not None:
             self.bar.close()
             self.bar = None
+
+    def stop_logging_writer(self) -> None:
+        """Closes the progress bar (also of a launch that stops before its last iteration) and the writer."""
+        self.close_bar()
+        super().stop_logging_writer()
 
 
 def read_progress(run_dir: Path) -> list[dict]:
@@ -86,6 +102,18 @@ def read_progress(run_dir: Path) -> list[dict]:
     path = Path(run_dir) / "progress.jsonl"
     if not path.exists():
         raise FileNotFoundError(f"{path} not found: not a training run folder (dynpush train writes it)")
+    return read_iteration_records(path)
+
+
+def read_evaluations(run_dir: Path) -> list[dict]:
+    """The evaluations during training of ``evaluations.jsonl`` (policies/training_eval.py), one per iteration (an
+    evaluation repeated after a resume keeps its last); empty for a run without them."""
+    path = Path(run_dir) / EVALUATIONS
+    return read_iteration_records(path) if path.exists() else []
+
+
+def read_iteration_records(path: Path) -> list[dict]:
+    """The JSON lines of ``path`` by their ``iteration``, in order; a later line of an iteration replaces an earlier."""
     records = {}
     for number, line in enumerate(path.read_text().splitlines(), 1):
         try:
@@ -127,19 +155,42 @@ def wall_clock_hours(records: list[dict]) -> np.ndarray:
     """Training wall-clock [h] at the end of each record's iteration.
 
     An iteration lasts the time between consecutive records; across a pause between sittings (a gap
-    longer than ``BREAK_FACTOR`` times the iteration's own rollout + update time) it counts that time only.
+    longer than ``BREAK_FACTOR`` times the iteration's own rollout + update + evaluation time) it counts that time
+    only. So the hours of a run resumed in several launches are the sum of the launches' iterations.
     """
-    seconds = [records[0]["collect_s"] + records[0]["learn_s"]] if records else []
+
+    def own(record: dict) -> float:
+        return record["collect_s"] + record["learn_s"] + record.get("eval_s", 0.0)
+
+    seconds = [own(records[0])] if records else []
     for previous, record in zip(records, records[1:]):
-        own = record["collect_s"] + record["learn_s"]
         gap = record["time"] - previous["time"]
-        seconds.append(gap if 0.0 < gap < BREAK_FACTOR * own else own)
+        seconds.append(gap if 0.0 < gap < BREAK_FACTOR * own(record) else own(record))
     return np.cumsum(seconds) / 3600.0
+
+
+def plot_evaluations(ax, x: np.ndarray, evaluations: list[dict]) -> None:
+    """The evaluations during training (``evaluations.jsonl``) at ``x``: success and toppled rate [% of episodes] and,
+    on a right-hand axis, the time the most violated constraint group is violated [% of an episode]."""
+    ax.plot(x, [e["success_rate"] for e in evaluations], "o-", color="tab:green", ms=3,
+            label=f"evaluation: success ({evaluations[-1]['episodes']} episodes)")
+    ax.plot(x, [e["toppled_rate"] for e in evaluations], "o-", color="tab:red", ms=3, label="evaluation: toppled")
+    ax.set_ylabel("% of episodes")
+    ax.set_ylim(-2, 102)
+    ax.legend(fontsize=8, loc="upper left")
+    worst = ax.twinx()
+    worst.plot(x, [max(e["constraint_violation_percent"].values()) for e in evaluations], "s--", color="tab:purple",
+               ms=3, label="evaluation: most violated constraint group")
+    worst.set_ylabel("% of episode violated", color="tab:purple")
+    worst.set_ylim(bottom=0.0)
+    worst.legend(fontsize=8, loc="upper right")
 
 
 def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float | None = None,
                         marked_iteration: int | None = None, imitation_run: Path | None = None) -> dict:
     """Success, topple and reward curves of a run against training wall-clock hours; writes the PNG ``out``.
+    A run that evaluates during training (``evaluations.jsonl``) gets two more panels: its evaluations against the
+    hours and against the world-steps.
 
     Episode rates are of the episodes that ended in each iteration (smoothed over ``SMOOTHING`` iterations).
     ``marked_iteration``: a vertical line where a checkpoint of that many iterations was saved (the shipped
@@ -169,8 +220,13 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     rates = {k.rsplit("/", 1)[-1]: smooth(100.0 * series(k)) for k in episode_keys}  # success, toppled; locomotion: fell
     colors = {"success": "tab:green", "toppled": "tab:red", "fell": "tab:brown"}
     difficulty = series("/curriculum/goal_difficulty")
-    fig = Figure(figsize=(8.0, 9.5 if records else 3.5), layout="constrained")
-    axes = list(np.atleast_1d(fig.subplots(4 if records else 1, 1, sharex=True)))  # a DAgger-only run: rates only
+    evaluations = read_evaluations(run_dir)
+    rows = (4 if records else 1) + (2 if evaluations else 0)  # a DAgger-only run: rates only
+    fig = Figure(figsize=(8.0, (9.5 if records else 3.5) + (4.5 if evaluations else 0.0)), layout="constrained")
+    all_axes = list(np.atleast_1d(fig.subplots(rows, 1)))
+    axes = all_axes[:-1] if evaluations else all_axes  # against training hours; the last: evaluations by world-steps
+    for ax in axes[1:]:
+        ax.sharex(axes[0])
     ax_rate = axes[0]
     for name, values in rates.items():
         ax_rate.plot(hours, values, color=colors.get(name), label=f"{name} (episodes ended in the iteration)")
@@ -188,7 +244,7 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     if ax_rate.get_legend_handles_labels()[0]:  # runs too short to end an episode have none
         ax_rate.legend(fontsize=8, loc="upper left")
     if records:
-        ax_reward, ax_delta, ax_policy = axes[1:]
+        ax_reward, ax_delta, ax_policy = axes[1:4]
         for key in dict.fromkeys(k for r in records for k in r if k.startswith("/reward/")):
             ax_reward.plot(hours, smooth(series(key)), label=key.rsplit("/", 1)[-1] + " reward term (mean over worlds)")
         ax_reward.set_ylabel("reward")
@@ -202,7 +258,14 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
                        label="critic: explained variance of the rollout's returns")
         ax_policy.set_ylabel("std / explained variance")
         ax_policy.legend(fontsize=8, loc="upper left")
-    axes[-1].set_xlabel("training wall-clock [h]")
+    if evaluations:
+        plot_evaluations(axes[-1], imitation_hours + np.array([e["training_hours"] for e in evaluations]), evaluations)
+        plot_evaluations(all_axes[-1], np.array([e["world_steps"] for e in evaluations], dtype=float), evaluations)
+        all_axes[-1].set_xlabel("CaT-PPO world-steps (all processes)")
+        all_axes[-1].grid(alpha=0.3)
+    for ax in axes[:-1]:
+        ax.tick_params(labelbottom=False)
+    axes[-1].set_xlabel("training wall-clock [h] (summed over launches)")
     for ax in axes:
         ax.grid(alpha=0.3)
         if imitation_hours > 0.0:

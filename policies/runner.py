@@ -5,23 +5,68 @@ in its ``process_env_step`` and adds its statistics to the extras that rsl_rl's 
 (``CaT/mean_delta``, ``CaT/violation_rate/<group>``). This runner builds CaT-PPO and, at the start of every
 iteration, applies the ``p_max`` curricula and the reach-reward weight (:mod:`dynpush.policies.schedules`) and keeps a
 snapshot of the training state, so that an interrupted run saves the last iteration boundary. Checkpoints also hold
-the environment's state and the RNG state, so a resumed run continues exactly as an uninterrupted one.
+the environment's state and the RNG state, so a resumed run continues exactly as an uninterrupted one. At an iteration
+boundary it also evaluates the actor when an evaluation is due (``evaluation``), and a launch with a
+:class:`TimeBudget` ends there, with a checkpoint, when the next iteration would not end in time.
 """
 
 from __future__ import annotations
 
 import copy
 import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
 
 import torch
 from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner
 
 from dynpush.policies.cat_ppo import CaTPPO
+from dynpush.policies.checkpoint_file import CheckpointError, read_checkpoint
 from dynpush.policies.curriculum import GoalCurriculumConfig
 from dynpush.policies.progress import ProgressLogger
 from dynpush.policies.expert_regularization import ExpertImitationLoss
+from dynpush.policies.run_folder import save_checkpoint
 from dynpush.policies.schedules import ScheduleConfig, disturbance_scale_at, imitation_weight_at, p_max_at, reach_weight_at
+
+
+@dataclass
+class TimeBudget:
+    """The wall-clock time one launch may train (``dynpush train --hours``).
+
+    The launch ends at the first iteration boundary at which the next iteration, predicted to last as long as the
+    last one (plus the last evaluation's time when one is due), would end after ``deadline``. A launch runs at least
+    one iteration: before it, nothing predicts how long one takes.
+    """
+
+    deadline: float  # [s since the epoch, time.time()] when the launch's time is up
+    iteration_s: float = 0.0  # [s] the last iteration: rollout, update, logging and saving
+    evaluation_s: float = 0.0  # [s] the last evaluation of this launch (0 before the first)
+
+    @staticmethod
+    def of_hours(hours: float, started: float) -> TimeBudget:
+        """``hours`` from ``started`` [s since the epoch]."""
+        return TimeBudget(deadline=started + 3600.0 * hours)
+
+    def next_iteration_fits(self, now: float, evaluating: bool) -> bool:
+        """Whether the next iteration (with an evaluation before it if ``evaluating``) ends before the deadline."""
+        return now + self.iteration_s + (self.evaluation_s if evaluating else 0.0) <= self.deadline
+
+
+class TimeBudgetSpent(Exception):
+    """Raised at the iteration boundary where a launch's :class:`TimeBudget` ends it."""
+
+
+class Evaluation(Protocol):
+    """Evaluates the actor at some iteration boundaries (policies/training_eval.py: PeriodicEvaluation)."""
+
+    def due(self, iteration: int) -> bool:
+        """Whether the actor is evaluated before ``iteration``."""
+
+    def __call__(self, iteration: int, actor: torch.nn.Module) -> dict:
+        """Evaluates ``actor`` after ``iteration`` iterations."""
 
 
 class CaTOnPolicyRunner(OnPolicyRunner):
@@ -54,24 +99,42 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             self.alg.symmetry = ExpertImitationLoss()
         self.logger.__class__ = ProgressLogger  # rsl_rl's logger plus a progress bar and a one-line summary
         self.logger.run_state = {}
+        self.keep_checkpoints = train_cfg.get("keep_checkpoints", 0)  # newest model_K.pt kept (0: all)
+        self.evaluation: Evaluation | None = None  # set on rank 0 by a run that evaluates during training
         self._snapshot: dict | None = None
 
     def learn(
-        self, num_learning_iterations: int, init_at_random_ep_len: bool = False, total_iterations: int | None = None
+        self, num_learning_iterations: int, init_at_random_ep_len: bool = False, total_iterations: int | None = None,
+        time_budget: TimeBudget | None = None,
     ) -> None:
         """Run rsl_rl's learning loop for ``num_learning_iterations`` from the current iteration.
 
         ``total_iterations`` is the length of the whole run the schedules refer to (default: this call's end).
+        ``time_budget``: the launch ends at the boundary where the next iteration would overrun it, with a checkpoint
+        (rank 0 decides for all processes).
         """
         start_it = self.current_learning_iteration
         total_it = total_iterations or start_it + num_learning_iterations
         iterations = iter(range(start_it, start_it + num_learning_iterations))
+        iteration_start = time.time()  # [s] the last boundary, plus the evaluation there
 
         def on_rollout_start() -> None:
+            nonlocal iteration_start
             it = next(iterations)
+            evaluating = self.evaluation is not None and self.evaluation.due(it)
+            if time_budget is not None and it > start_it:
+                time_budget.iteration_s = time.time() - iteration_start
+                if self.out_of_time(time_budget, evaluating):
+                    raise TimeBudgetSpent
+            iteration_start = time.time()
             if self.curriculum.enabled:
                 self.apply_curriculum(fresh_run=it == 0)
             self._snapshot = {"iteration": it, **copy.deepcopy(self._training_state(next_iteration=it))}
+            if evaluating:  # after the snapshot: an interrupted evaluation loses no iteration
+                seconds = self.evaluate(it)
+                iteration_start += seconds
+                if time_budget is not None:
+                    time_budget.evaluation_s = seconds
             self.apply_schedules(it, total_it)
             # Critic warm-up: without gradients the actor (and its std) stays as it is, its KL is 0, and the
             # adaptive learning rate is left unchanged.
@@ -81,7 +144,36 @@ class CaTOnPolicyRunner(OnPolicyRunner):
                                        else self.learning_rate)
 
         self.alg.on_rollout_start = on_rollout_start
-        super().learn(num_learning_iterations, init_at_random_ep_len)
+        try:
+            super().learn(num_learning_iterations, init_at_random_ep_len)
+        except TimeBudgetSpent:
+            self.stop_early()
+
+    def evaluate(self, iteration: int) -> float:
+        """Runs the evaluation due before ``iteration``; returns its wall-clock [s], which the logger leaves out of the
+        iteration's rollout time."""
+        started = time.time()
+        self.evaluation(iteration, self.alg.actor)
+        self.logger.evaluation_s = time.time() - started
+        return self.logger.evaluation_s
+
+    def out_of_time(self, budget: TimeBudget, evaluating: bool) -> bool:
+        """Whether the next iteration would overrun ``budget``: rank 0's prediction, which every process follows."""
+        stop = torch.tensor([not budget.next_iteration_fits(time.time(), evaluating)], dtype=torch.int32)
+        if self.is_distributed:
+            torch.distributed.broadcast(stop, src=0)
+        return bool(stop.item())
+
+    def stop_early(self) -> None:
+        """Ends the launch at this iteration boundary as rsl_rl ends a run: rank 0 saves a checkpoint that ``--resume``
+        continues from, and stops its writer."""
+        if self.logger.writer is None:
+            return
+        path = os.path.join(self.logger.log_dir, f"model_{self.current_learning_iteration}.pt")
+        self.save(path)
+        self.logger.stop_logging_writer()
+        print(f"time budget: stopped before iteration {self.current_learning_iteration + 1}; saved {path}; continue with"
+              " --resume")
 
     def set_learning_rate(self, learning_rate: float) -> None:
         """Sets PPO's learning rate (which the adaptive schedule starts from) and the optimizer's."""
@@ -122,7 +214,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         """Save models, optimiser, CaT state, environment state and RNG; ``iter`` is the next iteration to run."""
         saved = self._training_state(next_iteration=self.current_learning_iteration + 1)
         saved["infos"].update(infos or {})
-        torch.save(saved, path)
+        save_checkpoint(saved, Path(path), self.keep_checkpoints)
         self.logger.save_model(path, self.current_learning_iteration)
 
     def save_interrupted(self) -> str:
@@ -131,7 +223,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             raise RuntimeError("nothing to save: training had not started")
         path = os.path.join(self.logger.log_dir or ".", f"model_{self._snapshot['iteration']}.pt")
         state = {k: v for k, v in self._snapshot.items() if k != "iteration"}
-        torch.save(state, path)
+        save_checkpoint(state, Path(path), self.keep_checkpoints)
         return path
 
     def _configure_multi_gpu(self) -> None:
@@ -154,13 +246,10 @@ class CaTOnPolicyRunner(OnPolicyRunner):
     ) -> dict:
         """Load a checkpoint; restores the RNG, and the environment unless ``restore_env`` is False (a run
         resumed with another number of processes starts fresh episodes)."""
-        try:
-            loaded = torch.load(path, weights_only=False, map_location=map_location)
-        except Exception as error:  # a truncated or foreign file
-            raise RuntimeError(f"cannot read checkpoint {path}: {error}") from error
+        loaded = read_checkpoint(path, map_location)
         for key in ("actor_state_dict", "critic_state_dict", "iter"):
             if key not in loaded:
-                raise RuntimeError(f"checkpoint {path} is not a dynpush training checkpoint (missing {key!r})")
+                raise CheckpointError(f"checkpoint {path} is not a dynpush training checkpoint (missing {key!r})")
         if self.alg.load(loaded, load_cfg, strict):
             self.current_learning_iteration = loaded["iter"]
         infos = loaded.get("infos") or {}

@@ -16,8 +16,9 @@ import json
 import shutil
 from pathlib import Path
 
-import torch
+from dynpush.errors import MissingFileError
 
+from .checkpoint_file import read_checkpoint
 from .evaluate import EvalConfig, evaluate
 from .export import OnnxPolicy, export_policy, load_run_config, resolve_checkpoint
 from .locomotion_eval import LocomotionEvalConfig, evaluate_locomotion
@@ -30,7 +31,7 @@ def read_launches(run_dir: Path) -> list[dict]:
     """The ``dynpush imitate`` / ``dynpush train`` launches of a run (``launches.jsonl``), oldest first."""
     path = run_dir / "launches.jsonl"
     if not path.exists():
-        raise FileNotFoundError(f"{path} not found: the run's training command is unknown (dynpush train writes it)")
+        raise MissingFileError(f"{path} not found: the run's training command is unknown (dynpush train writes it)")
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
@@ -40,7 +41,7 @@ def provenance(run_dir: Path, checkpoint_path: Path) -> dict:
     commands come first and whose world-steps and hours are counted in."""
     cfg = load_run_config(run_dir)
     launches = read_launches(run_dir)
-    iteration = int(torch.load(checkpoint_path, weights_only=False, map_location="cpu")["iter"])  # completed iterations
+    iteration = int(read_checkpoint(checkpoint_path)["iter"])  # completed iterations
     trained = [r for r in training_records(run_dir) if r["iteration"] < iteration]
     imitation = imitation_summary(run_dir)
     record = {

@@ -10,21 +10,24 @@ from __future__ import annotations
 import ast
 import contextlib
 import dataclasses
-import json
 import os
 import signal
+import subprocess
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeVar
 
 import torch
 
+from dynpush.errors import MissingFileError
 from dynpush.sim.config import ConfigError, PushEnvConfig
 
 from dynpush.kernels.constraints import CONSTRAINT_GROUPS
 
 from .curriculum import GoalCurriculumConfig
-from .runner import CaTOnPolicyRunner
+from .run_folder import CONFIG, check_new_run, load_newest_readable, record_launch, write_config
+from .runner import CaTOnPolicyRunner, TimeBudget
 from .scripted import ScriptedPusherConfig, check_object_size
 from .schedules import ConstraintCurriculumConfig
 
@@ -55,6 +58,23 @@ class PPOConfig:
     # Ours: the critic learns values in reward-per-step units (rewards stored times 1 - gamma), which keeps the
     # returns within reach of rsl_rl's value clip (policies/cat_ppo.py).
     returns_per_step: bool = True
+
+    def validate(self) -> PPOConfig:
+        """Raises a ConfigError naming the first field out of its range."""
+        for name, low, high in (("learning_rate", 0.0, 1.0), ("gamma", 0.0, 1.0), ("lam", 0.0, 1.0)):
+            if not low < getattr(self, name) <= high:
+                raise ConfigError(f"ppo.{name} must lie in ({low:g}, {high:g}], got {getattr(self, name)!r}")
+        for name in ("clip_param", "desired_kl"):
+            if not getattr(self, name) > 0.0:
+                raise ConfigError(f"ppo.{name} must be > 0, got {getattr(self, name)!r}")
+        for name in ("num_learning_epochs", "num_mini_batches"):
+            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
+                raise ConfigError(f"ppo.{name} must be an integer >= 1, got {getattr(self, name)!r}")
+        if not self.entropy_coef >= 0.0:
+            raise ConfigError(f"ppo.entropy_coef must be >= 0, got {self.entropy_coef!r}")
+        if self.schedule not in ("adaptive", "fixed"):
+            raise ConfigError(f"ppo.schedule must be 'adaptive' or 'fixed', got {self.schedule!r}")
+        return self
 
 
 @dataclass
@@ -104,6 +124,17 @@ class TrainConfig:
     # More of that expert's gains, FIELD=VALUE of ScriptedPusherConfig (e.g. "push_speed=1.0"), the teacher of a
     # ``dynpush imitate --expert-set`` student.
     expert_overrides: tuple[str, ...] = ()
+    # Iterations between evaluations during training (ours; 0: none). Rank 0 runs the deterministic mean of the
+    # current actor for one episode in each of eval_episodes worlds of the paper's task (the run's environment with
+    # PushEnvConfig's default sampling), the loop of ``dynpush eval``, and appends the result to evaluations.jsonl.
+    # 256 episodes of 20 s are 256 k world-steps on one process while the others wait, the simulation of ~40
+    # iterations of the cpu preset under --procs 2 (6144 world-steps per process): an interval of 500 keeps the
+    # evaluations under ~8 % of the run.
+    eval_interval: int = 0
+    eval_episodes: int = 256  # worlds of the evaluation, one episode each
+    eval_seed: int = 0  # the evaluation environment's seed; every evaluation of a run starts the same episodes
+    # The newest model_K.pt kept after each save (0: all): a run folder under version control keeps a few.
+    keep_checkpoints: int = 0
 
     @staticmethod
     def preset_config(name: str) -> TrainConfig:
@@ -143,8 +174,10 @@ class TrainConfig:
             raise ConfigError(f"imitation_weight must be (first, last) with both >= 0, got {self.imitation_weight!r}")
         check_object_size("expert_object_size", self.expert_object_size)
         scripted_expert(self.expert_object_size, self.expert_overrides, "expert_overrides")
-        if self.ppo.schedule not in ("adaptive", "fixed"):
-            raise ConfigError(f"ppo.schedule must be 'adaptive' or 'fixed', got {self.ppo.schedule!r}")
+        self.ppo.validate()
+        for name, low in (("eval_interval", 0), ("eval_episodes", 1), ("keep_checkpoints", 0)):
+            if not isinstance(getattr(self, name), int) or getattr(self, name) < low:
+                raise ConfigError(f"{name} must be an integer >= {low}, got {getattr(self, name)!r}")
         return self
 
     def to_dict(self) -> dict:
@@ -179,6 +212,7 @@ class TrainConfig:
             "critic_warmup_iterations": self.critic_warmup_iterations,
             "critic_warmup_learning_rate": self.critic_warmup_learning_rate,
             "imitation_weight": tuple(self.imitation_weight),
+            "keep_checkpoints": self.keep_checkpoints,
         }
 
 
@@ -261,17 +295,6 @@ def scripted_expert(object_size: float | None, overrides: tuple[str, ...], name:
     return cfg
 
 
-IMITATION_CHECKPOINT = "imitation.pt"  # written by dynpush imitate; CaT-PPO starts from it
-
-
-def latest_checkpoint(run_dir: Path) -> Path | None:
-    """The run's ``model_K.pt`` with the largest K; before the first one, its imitation checkpoint (if any)."""
-    checkpoints = sorted(run_dir.glob("model_*.pt"), key=lambda p: int(p.stem.split("_")[1]))
-    if checkpoints:
-        return checkpoints[-1]
-    return run_dir / IMITATION_CHECKPOINT if (run_dir / IMITATION_CHECKPOINT).exists() else None
-
-
 @dataclass
 class ProcessGroup:
     """This process's place in a torchrun launch (``RANK``, ``WORLD_SIZE``); one process otherwise."""
@@ -291,48 +314,33 @@ class ProcessGroup:
 
 
 def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool = False, command: str | None = None,
-          extend_to: int | None = None, init_from: Path | None = None) -> CaTOnPolicyRunner:
+          extend_to: int | None = None, init_from: Path | None = None, hours: float | None = None,
+          started: float | None = None) -> CaTOnPolicyRunner:
     """Trains (or resumes) a push or locomotion policy (the task of ``cfg``'s type) into ``run_dir``; saves on
     Ctrl-C / SIGTERM.
 
-    A resumed run uses its own ``config.json``; ``extend_to`` changes its length to that many
-    iterations in all (schedules that scale with the run length follow the new length). A new run with
-    ``init_from`` (a checkpoint of another run with the same networks, e.g. its ``imitation.pt``) starts from
-    that run's actor and critic with their normalisers; its optimizer (learning rate of ``cfg``), action noise
-    (``cfg.network.init_noise_std``), CaT state, iteration count and episodes are its own. ``init_from`` may also be
-    an exported push ``policy.onnx`` (e.g. the shipped one): the actor and its normaliser come from the file, the
-    critic starts fresh and learns during ``critic_warmup_iterations`` (required) while the actor is held.
+    A new run needs a folder without a run in it; a resumed run uses its own ``config.json`` and its newest readable
+    checkpoint; ``extend_to`` changes its length to that many iterations in all (schedules that scale with the run
+    length follow the new length). A new run with ``init_from`` (a checkpoint of another run with the same networks,
+    e.g. its ``imitation.pt``) starts from that run's actor and critic with their normalisers; its optimizer
+    (learning rate of ``cfg``), action noise (``cfg.network.init_noise_std``), CaT state, iteration count and
+    episodes are its own. ``init_from`` may also be an exported push ``policy.onnx`` (e.g. the shipped one): the
+    actor and its normaliser come from the file, the critic starts fresh and learns during
+    ``critic_warmup_iterations`` (required) while the actor is held. Nothing is written into ``run_dir`` before all
+    of these inputs have been read and checked (policies/run_folder.py).
+
+    ``hours``: this launch ends at the last iteration boundary before ``hours`` from ``started`` (``time.time()``
+    of the launch; default: now), with a checkpoint that ``--resume`` continues.
 
     Under torchrun every process runs one shard of ``cfg.env.num_envs`` worlds; gradients and
-    normaliser statistics are averaged across processes (rsl_rl), rank 0 logs and saves.
+    normaliser statistics are averaged across processes (rsl_rl), rank 0 logs, evaluates and saves.
     """
+    time_budget = None if hours is None else TimeBudget.of_hours(hours, time.time() if started is None else started)
     group = ProcessGroup.from_environment()
-    config_path = run_dir / "config.json"
-    if resume:
-        if not config_path.exists():
-            raise FileNotFoundError(f"--resume: no {config_path}; start the run without --resume first")
-        cfg = type(cfg).from_dict(json.loads(config_path.read_text()))
-        if extend_to is not None:
-            cfg.iterations = extend_to
-    cfg.validate()
-    if init_from is not None and init_from.suffix == ".onnx" and not isinstance(cfg, TrainConfig):
-        raise ConfigError(f"--init-from {init_from}: an ONNX file can start a push run only; a locomotion run starts"
-                          " from a checkpoint (model_K.pt)")
-    if init_from is not None and init_from.suffix == ".onnx" and not cfg.critic_warmup_iterations:
-        raise ConfigError(f"--init-from {init_from}: an ONNX file holds the actor only; set critic_warmup_iterations > 0"
-                          " (e.g. 60) so that the new critic learns the returns before the actor is trained")
-    onnx_actor = None
-    if init_from is not None and init_from.suffix == ".onnx":  # read before anything is written: a mismatch loses nothing
-        from .export import build_actor, load_onnx_actor
-
-        onnx_actor = build_actor(cfg)
-        load_onnx_actor(onnx_actor, init_from)
+    cfg = run_config(cfg, run_dir, resume, extend_to)
+    onnx_actor = read_onnx_actor(cfg, init_from)
     if cfg.network.hold_actor_normalizer is None:
         cfg.network.hold_actor_normalizer = init_from is not None
-    if group.rank == 0:
-        run_dir.mkdir(parents=True, exist_ok=True)
-        config_path.write_text(json.dumps(cfg.to_dict(), indent=2))
-        record_launch(run_dir, command, group.world_size, resume, init_from)
     if cfg.env.device == "cpu":
         torch.set_num_threads(1)  # one core per process: Warp launches already use one
 
@@ -340,19 +348,14 @@ def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool 
     env = cfg.make_env(group.shard(cfg.env))
     log_dir = str(run_dir) if group.rank == 0 else None
     runner = CaTOnPolicyRunner(env, cfg.runner_cfg(), log_dir=log_dir, device=env.device)
-    if resume:
-        checkpoint = latest_checkpoint(run_dir)
-        if checkpoint is None:
-            raise FileNotFoundError(f"--resume: no model_*.pt in {run_dir}")
-        runner.load(str(checkpoint), restore_env=group.world_size == 1)
-    elif onnx_actor is not None:
-        runner.alg.actor.load_state_dict(onnx_actor.state_dict())
-        set_action_std(runner.alg.actor, cfg.network.init_noise_std)
-    elif init_from is not None:
-        runner.load(str(init_from), load_cfg={"actor": True, "critic": True}, restore_env=False)
-        set_action_std(runner.alg.actor, cfg.network.init_noise_std)
-    if cfg.network.hold_actor_normalizer:
-        hold_normalizer(runner.alg.actor)
+    start_from(runner, cfg, run_dir, resume, init_from, onnx_actor, group)
+    if group.rank == 0 and isinstance(cfg, TrainConfig) and cfg.eval_interval:
+        from .training_eval import PeriodicEvaluation
+
+        runner.evaluation = PeriodicEvaluation(cfg, run_dir)
+    if group.rank == 0:
+        write_config(run_dir, cfg.to_dict())
+        record_launch(run_dir, command, group.world_size, resume, init_from)
     remaining = cfg.iterations - runner.current_learning_iteration
     if remaining <= 0:
         print(f"{run_dir}: all {cfg.iterations} iterations done")
@@ -360,7 +363,7 @@ def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool 
 
     try:
         with sigterm_as_keyboard_interrupt():
-            runner.learn(remaining, total_iterations=cfg.iterations)
+            runner.learn(remaining, total_iterations=cfg.iterations, time_budget=time_budget)
     except KeyboardInterrupt:
         if group.rank == 0:
             path = runner.save_interrupted()
@@ -371,6 +374,62 @@ def train(cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool 
         if torch.distributed.is_initialized():
             torch.distributed.destroy_process_group()
     return runner
+
+
+def run_config(cfg: T, run_dir: Path, resume: bool, extend_to: int | None) -> T:
+    """The config a launch trains with, checked: ``cfg`` for a new run (whose folder must not hold a run), the run's
+    own ``config.json`` for a resumed one (``extend_to``: its new length in iterations)."""
+    if not resume:
+        check_new_run(run_dir)
+        return cfg.validate()
+    from .export import read_json
+
+    config_path = run_dir / CONFIG
+    if not config_path.exists():
+        raise MissingFileError(f"--resume: no {config_path}; start the run without --resume first")
+    cfg = type(cfg).from_dict(read_json(config_path))
+    if extend_to is not None:
+        cfg.iterations = extend_to
+    return cfg.validate()
+
+
+def read_onnx_actor(cfg: TrainConfig | LocomotionTrainConfig, init_from: Path | None) -> torch.nn.Module | None:
+    """The actor of an exported ``policy.onnx`` that a new run starts from (``init_from``), checked against ``cfg``;
+    None when ``init_from`` is not an ONNX file."""
+    if init_from is None or init_from.suffix != ".onnx":
+        return None
+    if not isinstance(cfg, TrainConfig):
+        raise ConfigError(f"--init-from {init_from}: an ONNX file can start a push run only; a locomotion run starts"
+                          " from a checkpoint (model_K.pt)")
+    if not cfg.critic_warmup_iterations:
+        raise ConfigError(f"--init-from {init_from}: an ONNX file holds the actor only; set critic_warmup_iterations > 0"
+                          " (e.g. 60) so that the new critic learns the returns before the actor is trained")
+    from .export import build_actor, load_onnx_actor
+
+    actor = build_actor(cfg)
+    load_onnx_actor(actor, init_from)
+    return actor
+
+
+def start_from(runner: CaTOnPolicyRunner, cfg: TrainConfig | LocomotionTrainConfig, run_dir: Path, resume: bool,
+               init_from: Path | None, onnx_actor: torch.nn.Module | None, group: ProcessGroup) -> None:
+    """Loads what the run starts from into ``runner``: its newest readable checkpoint (``resume``; one line says
+    which newer ones were unreadable), another run's actor and critic (``init_from`` checkpoint) or an exported
+    actor (``onnx_actor``); then holds the actor's normaliser if the config says so."""
+    if resume:
+        # A run resumed with another number of processes cannot restore the saved shard: fresh episodes.
+        checkpoint, skipped = load_newest_readable(
+            run_dir, lambda path: runner.load(str(path), restore_env=group.world_size == 1))
+        if skipped and group.rank == 0:
+            print(f"--resume: skipped unreadable {', '.join(skipped)}; resuming from {checkpoint.name}")
+    elif onnx_actor is not None:
+        runner.alg.actor.load_state_dict(onnx_actor.state_dict())
+        set_action_std(runner.alg.actor, cfg.network.init_noise_std)
+    elif init_from is not None:
+        runner.load(str(init_from), load_cfg={"actor": True, "critic": True}, restore_env=False)
+        set_action_std(runner.alg.actor, cfg.network.init_noise_std)
+    if cfg.network.hold_actor_normalizer:
+        hold_normalizer(runner.alg.actor)
 
 
 @contextlib.contextmanager
@@ -388,20 +447,6 @@ def sigterm_as_keyboard_interrupt():
         signal.signal(signal.SIGTERM, previous)
 
 
-def source_commit() -> str | None:
-    """The git commit of the dynpush sources (with ``-dirty`` when they have uncommitted changes), or None."""
-    import subprocess
-
-    root = Path(__file__).resolve().parent.parent
-    try:
-        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root, capture_output=True,
-                               text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return None
-    return commit + ("-dirty" if dirty else "")
-
-
 def set_action_std(actor: torch.nn.Module, std: float) -> None:
     """Sets the standard deviation of ``actor``'s Gaussian action distribution (every action) to ``std``; the
     distribution is rsl_rl's with a scalar std parameter (``rsl_rl_runner_cfg``)."""
@@ -415,24 +460,41 @@ def hold_normalizer(model: torch.nn.Module) -> None:
     model.obs_normalizer.until = 0
 
 
-def record_launch(run_dir: Path, command: str | None, procs: int, resume: bool, init_from: Path | None = None) -> None:
-    """Appends this launch (the ``dynpush train`` command line, processes, commit, time and the checkpoint a new
-    run started from) to ``launches.jsonl``."""
-    import time
-
-    record = {"command": command, "processes": procs, "resume": resume, "commit": source_commit(),
-              "torch": torch.__version__, "time": time.time()}
-    if init_from is not None:
-        record["init_from"] = str(Path(init_from).resolve())
-    with open(run_dir / "launches.jsonl", "a") as f:
-        f.write(json.dumps(record) + "\n")
+FORWARDED_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)  # what stops a launcher: kill, Ctrl-C, hang-up
 
 
 def launch_processes(procs: int, argv: list[str]) -> int:
-    """Re-runs ``dynpush train`` under torchrun with ``procs`` processes on this machine."""
-    import subprocess
+    """Re-runs ``dynpush train`` under torchrun with ``procs`` processes on this machine; returns torchrun's exit
+    status.
+
+    torchrun runs in a session of its own, so that a stop reaches it through this process only: SIGTERM, SIGINT or
+    SIGHUP to this process (unless it ignores that signal, as under ``nohup``) is sent on to torchrun as SIGTERM,
+    which torchrun sends to the ranks, which save their last iteration boundary; this process waits for torchrun and
+    returns its (non-zero) status. Left to their defaults, a signal ended this process alone and torchrun and the
+    ranks trained on.
+    """
     import sys
 
     command = [sys.executable, "-m", "torch.distributed.run", "--standalone", f"--nproc_per_node={procs}",
                "-m", "dynpush", "train", *argv]
-    return subprocess.call(command)
+    torchrun = subprocess.Popen(command, start_new_session=True)
+    with forward_signals_as_sigterm(torchrun):
+        return torchrun.wait()
+
+
+@contextlib.contextmanager
+def forward_signals_as_sigterm(process: subprocess.Popen):
+    """Within the block, each of ``FORWARDED_SIGNALS`` that this process does not ignore is sent to ``process`` as
+    SIGTERM instead of acting here."""
+
+    def forward(signum, frame):
+        process.send_signal(signal.SIGTERM)
+
+    # A handler that is not Python's (None) is left alone, as are ignored signals.
+    handled = [sig for sig in FORWARDED_SIGNALS if signal.getsignal(sig) not in (signal.SIG_IGN, None)]
+    previous = {sig: signal.signal(sig, forward) for sig in handled}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

@@ -6,7 +6,7 @@ targets and the 6D base command out, every tick logged. Modules, one job each:
 - ``observation``: the 54-d actor observation (equal to the simulator's kernel); ``contract``: the
   ONNX metadata contract between training and deployment
 - ``config``: the YAML configuration; ``frames``: poses and frame conventions; ``packets``: the UDP
-  datagrams; ``udp``: the socket
+  datagrams; ``udp``: the socket; ``trust``: which senders and datagrams a receiver admits
 - ``mocap``: pose sources; ``robot_link``: state in, commands out; ``goals``: object goals
 - ``policy``: ONNX sessions and start-up checks; ``locomotion``: a locomotion ONNX
 - ``safety``: the state machine and limits; ``controller``: one tick; ``timing``: clocks and the

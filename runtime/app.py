@@ -3,34 +3,47 @@
 Each tick (absolute deadline, timing.py): take in whatever arrived (mocap, robot state, goal
 commands, stamped with the tick's start time), run the controller, send the command, write the tick
 log record, record lateness, compute time and mocap age. ``run`` returns a summary (p50/p99/max of
-the timings, state counts, dropped datagrams, the log path) when stopped.
+the timings, state counts, dropped datagrams, the log path) when stopped, also after a tick that raised
+(a bug): that tick's exception latches STOPPED, a stop command goes out, and the run ends.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import logging
 import threading
 import time
 from collections import Counter
-from pathlib import Path
 
 from .config import NUM_LEG_JOINTS, RuntimeConfig
 from .controller import Controller
+from .errors import StartupError
 from .goals import GoalManager
 from .locomotion import OnnxLocomotion
 from .mocap import open_mocap
 from .policy import load_push_policy
 from .robot_link import open_robot_link
 from .safety import State
-from .tick_log import TickLogWriter
+from .tick_log import RecordLayout, TickLogWriter
 from .timing import Clock, LockstepClock, RealClock, Ticker, TimingStats
+
+_LOG = logging.getLogger(__name__)
+
+
+def open_tick_log(cfg: RuntimeConfig, layout: RecordLayout, meta: dict) -> TickLogWriter:
+    """A new tick log in ``log.directory`` named by the start time; StartupError naming the field if it cannot be made."""
+    try:
+        return TickLogWriter.new_in(cfg.log.directory, time.strftime("runtime-%Y%m%d-%H%M%S"), layout, meta,
+                                    cfg.rates.log_flush_s)
+    except OSError as error:
+        raise StartupError(f"log.directory {cfg.log.directory}: cannot create a tick log there: {error}") from error
 
 
 class Runtime:
     """Everything of one deployment run; build (start-up checks happen here), then :meth:`run`."""
 
-    def __init__(self, cfg: RuntimeConfig, stop: threading.Event | None = None, log_path: str | Path | None = None):
+    def __init__(self, cfg: RuntimeConfig, stop: threading.Event | None = None):
         self.cfg = cfg
         self.stop = stop or threading.Event()
         push, self.contract = load_push_policy(cfg)  # raises StartupError before anything is opened
@@ -45,16 +58,16 @@ class Runtime:
             resources.callback(self.mocap.close)
             self.goals = GoalManager(cfg.goals)
             resources.callback(self.goals.close)
-            path = log_path or Path(cfg.log.directory) / time.strftime("runtime-%Y%m%d-%H%M%S.dplog")
             meta = {"config": cfg.to_dict(), "contract": dataclasses.asdict(self.contract),
                     "states": {s.name: int(s) for s in State}, "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-            self.log = TickLogWriter(path, self.controller.layout, meta, cfg.rates.log_flush_s)
+            self.log = open_tick_log(cfg, self.controller.layout, meta)
             resources.callback(self.log.close)
             self._close = resources.pop_all()
         self.ticker = Ticker(self.clock, cfg.control_period_s)
         self.stats = TimingStats()
         self.state_ticks: Counter[str] = Counter()
         self.ticks = 0
+        self.error: Exception | None = None  # what ended the run early (a bug), if anything
 
     def tick(self) -> None:
         """Waits for the next deadline and runs one control tick."""
@@ -82,6 +95,10 @@ class Runtime:
         try:
             while not self.stop.is_set() and (max_ticks is None or self.ticks < max_ticks):
                 self.tick()
+        except Exception as error:  # a bug: the robot is stopped, and the summary still comes
+            self.error = error
+            _LOG.error("tick %d failed; the robot is sent a stop command", self.ticks, exc_info=error)
+            self.link.send(self.controller.stop(self.clock.now(), f"tick failed: {type(error).__name__}: {error}"))
         finally:
             self._close.close()
         return self.summary()
@@ -95,7 +112,7 @@ class Runtime:
             "final_reason": safety.reason,
             "mocap": dataclasses.asdict(self.mocap.stats),
             "robot_link": dataclasses.asdict(self.link.stats),
-            "goal_commands": {"accepted": self.goals.commands, "malformed": self.goals.malformed},
+            "goal_commands": dataclasses.asdict(self.goals.stats),
             "log": str(self.log.path),
             "log_records": self.log.records,
         }

@@ -1,7 +1,7 @@
 """``dynpush`` subcommands of dynpush.runtime (registered by ``dynpush.cli``): run, replay, sim2sim, demo.
 
-Each prints one JSON document on stdout. Invalid configs, failed start-up checks and unreadable logs
-end with a message on stderr and exit status 2.
+Each prints one JSON document on stdout. Invalid configs, failed start-up checks and unreadable logs raise
+user errors (``dynpush.errors``), which ``dynpush``'s ``main()`` prints as one line with exit status 2.
 """
 
 from __future__ import annotations
@@ -15,21 +15,12 @@ import threading
 from pathlib import Path
 
 
-def _fail(error: Exception) -> int:
-    print(f"dynpush: {error}", file=sys.stderr)
-    return 2
-
-
 def _run(args: argparse.Namespace) -> int:
     from .app import Runtime
-    from .config import RuntimeConfigError, load_config
-    from .errors import StartupError
+    from .config import load_config
 
     stop = threading.Event()
-    try:
-        runtime = Runtime(load_config(args.config), stop)
-    except (RuntimeConfigError, StartupError) as error:
-        return _fail(error)
+    runtime = Runtime(load_config(args.config), stop)
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     if args.max_seconds is not None:
@@ -37,20 +28,15 @@ def _run(args: argparse.Namespace) -> int:
         timer.daemon = True
         timer.start()
     print(f"dynpush run: logging to {runtime.log.path}; Ctrl-C stops", file=sys.stderr)
-    print(json.dumps(runtime.run(), indent=1))
-    return 0
+    summary = runtime.run()
+    print(json.dumps(summary, indent=1))
+    return 0 if runtime.error is None else 1
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from .errors import StartupError
     from .replay import replay
-    from .tick_log import TickLogError
 
-    try:
-        report = replay(Path(args.log), args.policy)
-    except (OSError, StartupError, TickLogError) as error:
-        return _fail(error)
-    print(json.dumps(report, indent=1))
+    print(json.dumps(replay(Path(args.log), args.policy), indent=1))
     return 0
 
 
@@ -70,18 +56,13 @@ def _locomotion_policy(args: argparse.Namespace) -> str | None:
 
 
 def _sim2sim(args: argparse.Namespace) -> int:
-    from .config import RuntimeConfigError
-    from .errors import StartupError
     from .sim2sim import SimToSimOptions, run_sim2sim
 
-    try:
-        options = SimToSimOptions(policy=args.policy, episodes=args.episodes, mocap_noise_m=args.mocap_noise,
-                                  mocap_noise_rad=args.mocap_noise_rad, latency_s=args.latency, drop=args.drop,
-                                  lockstep=args.lockstep, seed=args.seed, config=args.config, overrides=args.set or [],
-                                  log_dir=args.log_dir, trajectory_png=args.png, locomotion_policy=_locomotion_policy(args))
-        report = run_sim2sim(options)
-    except (RuntimeConfigError, StartupError, FileNotFoundError) as error:
-        return _fail(error)
+    options = SimToSimOptions(policy=args.policy, episodes=args.episodes, mocap_noise_m=args.mocap_noise,
+                              mocap_noise_rad=args.mocap_noise_rad, latency_s=args.latency, drop=args.drop,
+                              lockstep=args.lockstep, seed=args.seed, config=args.config, overrides=args.set or [],
+                              log_dir=args.log_dir, trajectory_png=args.png, locomotion_policy=_locomotion_policy(args))
+    report = run_sim2sim(options)
     text = json.dumps(report, indent=1)
     if args.out:
         Path(args.out).write_text(text)
@@ -92,25 +73,20 @@ def _sim2sim(args: argparse.Namespace) -> int:
 def _demo(args: argparse.Namespace) -> int:
     from dynpush.shipped import shipped_file, training_record
 
-    from .config import RuntimeConfigError
-    from .errors import StartupError
     from .sim2sim import SimToSimOptions, run_sim2sim
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     record = training_record()
-    try:
-        options = SimToSimOptions(policy=str(shipped_file("policy.onnx")), episodes=args.episodes, lockstep=args.lockstep,
-                                  seed=args.seed, overrides=args.set or [], log_dir=str(out),
-                                  trajectory_png=str(out / "demo.png"), locomotion_policy=_locomotion_policy(args))
-        legs = (f"legged robot, locomotion {options.locomotion_policy} in the runtime" if options.locomotion_policy
-                else "tracked base")
-        print(f"dynpush demo: the shipped policy ({record['run']}, {record['iterations']} iterations) through the"
-              f" deployment runtime against the simulator ({legs}), {args.episodes} episodes"
-              f" ({'lock-step' if args.lockstep else 'real time, 50 Hz'})", file=sys.stderr)
-        report = run_sim2sim(options)
-    except (RuntimeConfigError, StartupError, FileNotFoundError) as error:
-        return _fail(error)
+    options = SimToSimOptions(policy=str(shipped_file("policy.onnx")), episodes=args.episodes, lockstep=args.lockstep,
+                              seed=args.seed, overrides=args.set or [], log_dir=str(out),
+                              trajectory_png=str(out / "demo.png"), locomotion_policy=_locomotion_policy(args))
+    legs = (f"legged robot, locomotion {options.locomotion_policy} in the runtime" if options.locomotion_policy
+            else "tracked base")
+    print(f"dynpush demo: the shipped policy ({record['run']}, {record['iterations']} iterations) through the"
+          f" deployment runtime against the simulator ({legs}), {args.episodes} episodes"
+          f" ({'lock-step' if args.lockstep else 'real time, 50 Hz'})", file=sys.stderr)
+    report = run_sim2sim(options)
     (out / "demo.json").write_text(json.dumps(report, indent=1))
     for episode in report["episode_results"]:
         outcome = (f"success at {episode['time_to_success_s']:.1f} s" if episode["success"]

@@ -9,12 +9,17 @@ file; ``log.directory`` is relative to the working directory.
 
 Frames and units: goals are in the runtime's world frame (Z-up, metres, yaw in degrees about z);
 limits are radians (joints) and the locomotion command's units (m/s, rad/s, rad, m).
+
+Network trust: every UDP socket binds to one named IPv4 address (``bind_address``; the wildcard 0.0.0.0
+is refused) and takes datagrams only from the addresses in its section's ``allowed_senders``; goals
+must lie within ``goals.workspace`` (``trust.py``, ``goals.py``).
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import ipaddress
 import math
 import types
 import typing
@@ -24,6 +29,7 @@ from pathlib import Path
 import yaml
 
 from dynpush.assets_usd import ARM_JOINT_NAMES
+from dynpush.errors import UserError
 
 from .frames import QUATERNION_ORDERS, UNITS, UP_AXES, BodyOffset, FrameConvention
 from .observation import NUM_ARM_JOINTS
@@ -34,6 +40,10 @@ ROBOT_LINKS = ("udp",)
 LOCOMOTION_MODES = ("onboard", "onnx")
 CLOCKS = ("realtime", "lockstep")
 NUM_LEG_JOINTS = 12
+MAX_TIMEOUT_S = 1.0  # staleness limits: older measurements must stop the robot within a second
+MAX_RAMP_S = 60.0
+MAX_ADVANCE_AFTER_S = 3600.0
+LOOPBACK = "127.0.0.1"
 # Terms a locomotion ONNX observation may be built from, with their sizes (see locomotion.py).
 LOCOMOTION_TERMS: dict[str, int] = {
     "base_linear_velocity_b": 3,
@@ -48,7 +58,7 @@ LOCOMOTION_TERMS: dict[str, int] = {
 }
 
 
-class RuntimeConfigError(ValueError):
+class RuntimeConfigError(UserError, ValueError):
     """An invalid runtime configuration; the message names the field and the allowed values."""
 
 
@@ -63,6 +73,33 @@ def _check_choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
 
 def _check_positive(name: str, value: float) -> None:
     _require(math.isfinite(value) and value > 0.0, f"{name} must be a finite number > 0, got {value!r}")
+
+
+def _check_at_most(name: str, value: float, upper: float) -> None:
+    _require(value <= upper, f"{name} must be <= {upper}, got {value!r}")
+
+
+def _check_finite(name: str, values: list[float]) -> None:
+    for i, value in enumerate(values):
+        _require(math.isfinite(value), f"{name}[{i}] must be finite, got {value!r}")
+
+
+def _ipv4(name: str, value: str) -> ipaddress.IPv4Address:
+    try:
+        return ipaddress.IPv4Address(value)
+    except ValueError:
+        raise RuntimeConfigError(f"{name} must be an IPv4 address such as {LOOPBACK}, got {value!r}") from None
+
+
+def _check_bind_address(name: str, value: str) -> None:
+    _require(not _ipv4(name, value).is_unspecified, f"{name} must name one interface's address ({LOOPBACK}, or this"
+             f" computer's address on the robot's network), not {value!r}, which listens on every interface")
+
+
+def _check_senders(name: str, values: list[str]) -> None:
+    _require(bool(values), f"{name} must list at least one sender address (e.g. [{LOOPBACK}])")
+    for i, value in enumerate(values):
+        _ipv4(f"{name}[{i}]", value)
 
 
 def _check_port(name: str, value: int) -> None:
@@ -97,8 +134,9 @@ class MocapConfig:
     frames: FrameConvention = field(default_factory=FrameConvention)
     base_offset: BodyOffset = field(default_factory=BodyOffset)  # robot base frame in the tracked frame
     object_offset: BodyOffset = field(default_factory=BodyOffset)  # object centroid frame in the tracked frame
-    bind_address: str = "127.0.0.1"  # udp: listen address (127.0.0.1 unless the stream comes from another host)
+    bind_address: str = LOOPBACK  # udp: listen address (127.0.0.1 unless the stream comes from another host)
     port: int = 9870  # udp
+    allowed_senders: list[str] = field(default_factory=lambda: [LOOPBACK])  # udp: addresses DPM1 is taken from
     hostname: str = ""  # motioncapture: address of the mocap server
     options: dict[str, str] = field(default_factory=dict)  # motioncapture: extra connect() options
     replay_log: str = ""  # replay: a tick log written by this runtime
@@ -108,6 +146,7 @@ class MocapConfig:
         _require(bool(self.base_body) and bool(self.object_body) and self.base_body != self.object_body,
                  f"{prefix}.base_body and {prefix}.object_body must be two different non-empty names")
         _check_positive(f"{prefix}.timeout_s", self.timeout_s)
+        _check_at_most(f"{prefix}.timeout_s", self.timeout_s, MAX_TIMEOUT_S)
         f = self.frames
         _check_choice(f"{prefix}.frames.up_axis", f.up_axis, UP_AXES)
         _check_choice(f"{prefix}.frames.quaternion_order", f.quaternion_order, QUATERNION_ORDERS)
@@ -116,8 +155,12 @@ class MocapConfig:
             offset = getattr(self, name)
             _check_length(f"{prefix}.{name}.position", offset.position, 3)
             _check_length(f"{prefix}.{name}.quat_xyzw", offset.quat_xyzw, 4)
+            _check_finite(f"{prefix}.{name}.position", offset.position)
+            _check_finite(f"{prefix}.{name}.quat_xyzw", offset.quat_xyzw)
             _require(math.hypot(*offset.quat_xyzw) > 1e-6, f"{prefix}.{name}.quat_xyzw must be non-zero")
+        _check_bind_address(f"{prefix}.bind_address", self.bind_address)
         _check_port(f"{prefix}.port", self.port)
+        _check_senders(f"{prefix}.allowed_senders", self.allowed_senders)
         if self.source in MOTIONCAPTURE_SOURCES:
             _require(f.quaternion_order == "xyzw", f"{prefix}.frames.quaternion_order must be 'xyzw' for the motioncapture"
                      f" package (it names its quaternion components), got {f.quaternion_order!r}")
@@ -132,9 +175,10 @@ class RobotConfig:
     """The robot link: state in, targets out (``DPS1`` / ``DPC1`` over UDP, see packets.py)."""
 
     link: str = "udp"
-    bind_address: str = "127.0.0.1"  # the runtime receives robot state here
+    bind_address: str = LOOPBACK  # the runtime receives robot state here
     port: int = 9871
-    robot_address: str = ""  # commands go to (robot_address, robot_port); "" = the sender of the latest state
+    allowed_senders: list[str] = field(default_factory=lambda: [LOOPBACK])  # addresses DPS1 is taken from
+    robot_address: str = ""  # commands go to (robot_address, robot_port); "" = the first admitted state's sender
     robot_port: int = 9872
     timeout_s: float = 0.1  # robot state older than this stops the robot (damping)
     arm_joint_names: list[str] = field(default_factory=lambda: list(ARM_JOINT_NAMES[:NUM_ARM_JOINTS]))
@@ -142,9 +186,14 @@ class RobotConfig:
 
     def validate(self, prefix: str = "robot") -> None:
         _check_choice(f"{prefix}.link", self.link, ROBOT_LINKS)
+        _check_bind_address(f"{prefix}.bind_address", self.bind_address)
         _check_port(f"{prefix}.port", self.port)
+        _check_senders(f"{prefix}.allowed_senders", self.allowed_senders)
+        if self.robot_address:
+            _ipv4(f"{prefix}.robot_address", self.robot_address)
         _check_port(f"{prefix}.robot_port", self.robot_port)
         _check_positive(f"{prefix}.timeout_s", self.timeout_s)
+        _check_at_most(f"{prefix}.timeout_s", self.timeout_s, MAX_TIMEOUT_S)
         _check_length(f"{prefix}.arm_joint_names", self.arm_joint_names, NUM_ARM_JOINTS)
         _check_length(f"{prefix}.leg_joint_names", self.leg_joint_names, NUM_LEG_JOINTS, allow_empty=True)
 
@@ -192,6 +241,7 @@ class OnnxLocomotionConfig:
             _require(math.isfinite(term.scale), f"{prefix}.observation[{i}].scale must be finite")
         _check_length(f"{prefix}.joint_names", self.joint_names, NUM_LEG_JOINTS)
         _check_length(f"{prefix}.default_joint_positions", self.default_joint_positions, NUM_LEG_JOINTS)
+        _check_finite(f"{prefix}.default_joint_positions", self.default_joint_positions)
         _check_positive(f"{prefix}.action_scale", self.action_scale)
 
 
@@ -236,6 +286,7 @@ class SafetyConfig:
 
     def validate(self, prefix: str = "safety", legs_required: bool = False) -> None:
         _check_positive(f"{prefix}.arm_ramp_s", self.arm_ramp_s)
+        _check_at_most(f"{prefix}.arm_ramp_s", self.arm_ramp_s, MAX_RAMP_S)
         _require(0.0 < self.max_tilt_deg < 90.0, f"{prefix}.max_tilt_deg must lie in (0, 90), got {self.max_tilt_deg!r}")
         _check_limits(f"{prefix}.arm_joint", self.arm_joint_lower, self.arm_joint_upper, NUM_ARM_JOINTS, False)
         _check_limits(f"{prefix}.base_command", self.base_command_lower, self.base_command_upper, 6, False)
@@ -250,21 +301,56 @@ class GoalConfig:
 
 
 @dataclass
+class WorkspaceConfig:
+    """Where goals may lie: the rectangle the robot may push objects in, world frame [m]."""
+
+    x_min: float = -5.0
+    x_max: float = 5.0
+    y_min: float = -5.0
+    y_max: float = 5.0
+
+    def validate(self, prefix: str) -> None:
+        for axis in ("x", "y"):
+            lower, upper = getattr(self, f"{axis}_min"), getattr(self, f"{axis}_max")
+            _require(math.isfinite(lower) and math.isfinite(upper) and lower < upper,
+                     f"{prefix}.{axis}_min and {prefix}.{axis}_max must be finite with {axis}_min < {axis}_max,"
+                     f" got {lower!r}, {upper!r}")
+
+    def outside(self, x: float, y: float) -> str | None:
+        """Why the point (x, y) [m] is no goal (outside the rectangle or not finite), or None."""
+        for axis, value in (("x", x), ("y", y)):
+            lower, upper = getattr(self, f"{axis}_min"), getattr(self, f"{axis}_max")
+            if not math.isfinite(value):
+                return f"{axis} {value!r} not finite"
+            if not lower <= value <= upper:
+                return f"{axis} {value!r} m outside the workspace [{lower}, {upper}]"
+        return None
+
+
+@dataclass
 class GoalsConfig:
     """Object goals: the list is taken in order (cyclically); ``DPG1`` commands set or advance the goal."""
 
     sequence: list[GoalConfig] = field(default_factory=list)
     advance_after_s: float | None = None  # after success, wait this long and take the next goal; null = wait for a command
     command_port: int | None = 9873  # DPG1 goal commands are received here; null = no goal commands
-    bind_address: str = "127.0.0.1"
+    bind_address: str = LOOPBACK
+    allowed_senders: list[str] = field(default_factory=lambda: [LOOPBACK])  # addresses DPG1 is taken from
+    workspace: WorkspaceConfig = field(default_factory=WorkspaceConfig)  # goals outside it are refused
 
     def validate(self, prefix: str = "goals") -> None:
+        self.workspace.validate(f"{prefix}.workspace")
         for i, goal in enumerate(self.sequence):
-            _require(all(math.isfinite(v) for v in (goal.x, goal.y, goal.yaw_deg)), f"{prefix}.sequence[{i}] must be finite")
+            _require(math.isfinite(goal.yaw_deg), f"{prefix}.sequence[{i}].yaw_deg must be finite")
+            outside = self.workspace.outside(goal.x, goal.y)
+            _require(outside is None, f"{prefix}.sequence[{i}]: {outside} ({prefix}.workspace)")
         if self.advance_after_s is not None:
-            _require(math.isfinite(self.advance_after_s) and self.advance_after_s >= 0.0,
-                     f"{prefix}.advance_after_s must be null or a number >= 0, got {self.advance_after_s!r}")
+            _require(math.isfinite(self.advance_after_s) and 0.0 <= self.advance_after_s <= MAX_ADVANCE_AFTER_S,
+                     f"{prefix}.advance_after_s must be null or a number in [0, {MAX_ADVANCE_AFTER_S}],"
+                     f" got {self.advance_after_s!r}")
             _require(bool(self.sequence), f"{prefix}.advance_after_s needs goals in {prefix}.sequence")
+        _check_bind_address(f"{prefix}.bind_address", self.bind_address)
+        _check_senders(f"{prefix}.allowed_senders", self.allowed_senders)
         if self.command_port is not None:
             _check_port(f"{prefix}.command_port", self.command_port)
         _require(bool(self.sequence) or self.command_port is not None,
@@ -332,7 +418,7 @@ def _convert(value: object, kind: object, name: str) -> object:
     if origin is dict:
         if not isinstance(value, dict):
             raise RuntimeConfigError(f"{name} must be a mapping, got {value!r}")
-        return {str(k): str(v) for k, v in value.items()}
+        return {_convert(k, args[0], f"{name} key"): _convert(v, args[1], f"{name}.{k}") for k, v in value.items()}
     if kind is float and isinstance(value, (int, float)) and not isinstance(value, bool):
         return float(value)
     if kind is float and isinstance(value, str):  # PyYAML reads 1e-3 (no dot) as a string

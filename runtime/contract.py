@@ -10,7 +10,10 @@ the runtime can check a policy against its configuration before it moves a robot
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import asdict, dataclass, field, fields
+
+from dynpush.errors import UserError
 
 from .observation import NUM_ACTIONS, POLICY_OBSERVATION_LAYOUT
 
@@ -33,7 +36,7 @@ OBSERVATION_FRAMES = {
 }
 
 
-class ContractError(ValueError):
+class ContractError(UserError, ValueError):
     """A policy file whose contract is missing, malformed or does not match what the runtime expects."""
 
 
@@ -88,7 +91,12 @@ class PolicyContract:
             except json.JSONDecodeError as error:
                 raise ContractError(f"policy metadata {f.name!r} is not valid JSON: {error}") from error
         contract = PolicyContract(**values)
-        contract.validate()
+        try:
+            contract.validate()
+        except ContractError:
+            raise
+        except (TypeError, ValueError) as error:  # a value of the wrong kind, e.g. a number where a list belongs
+            raise ContractError(f"policy metadata is malformed: {error}") from error
         return contract
 
     def validate(self) -> None:
@@ -102,11 +110,43 @@ class PolicyContract:
         for name, size in (("base_command_default", 6), ("base_command_scale", 6), ("base_command_lower", 6),
                            ("base_command_upper", 6), ("arm_joint_names", 5), ("arm_default_joint_positions", 5),
                            ("arm_joint_lower", 5), ("arm_joint_upper", 5), ("arm_joint_velocity_limit", 5)):
-            if len(getattr(self, name)) != size:
+            if not isinstance(getattr(self, name), list) or len(getattr(self, name)) != size:
                 raise ContractError(f"{name} must have {size} entries, got {getattr(self, name)!r}")
         if self.quaternion_order != QUATERNION_ORDER:
             raise ContractError(f"quaternion_order must be {QUATERNION_ORDER!r}, got {self.quaternion_order!r}")
-        if not self.control_period_s > 0.0:
-            raise ContractError(f"control_period_s must be > 0, got {self.control_period_s!r}")
+        self._validate_numbers()
+
+    def _validate_numbers(self) -> None:
+        """The numbers the runtime turns into commands: finite, scales and thresholds > 0, every default within its
+        limits (a NaN or inverted limit here would reach the robot)."""
+        for name in ("base_command_default", "base_command_lower", "base_command_upper", "arm_default_joint_positions",
+                     "arm_joint_lower", "arm_joint_upper"):
+            for i, value in enumerate(getattr(self, name)):
+                _check_number(f"{name}[{i}]", value)
+        for name in ("base_command_scale", "arm_joint_velocity_limit"):
+            for i, value in enumerate(getattr(self, name)):
+                _check_number(f"{name}[{i}]", value, positive=True)
+        for name in ("arm_action_scale", "action_clip", "control_period_s", "success_distance_m", "success_angle_rad"):
+            _check_number(name, getattr(self, name), positive=True)
+        _check_number("frozen_joint_position", self.frozen_joint_position)
+        _check_within("base_command_default", self.base_command_default, "base_command", self.base_command_lower,
+                      self.base_command_upper)
+        _check_within("arm_default_joint_positions", self.arm_default_joint_positions, "arm_joint", self.arm_joint_lower,
+                      self.arm_joint_upper)
+
+
+def _check_number(name: str, value: object, positive: bool = False) -> None:
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if not ok or (positive and not value > 0.0):
+        raise ContractError(f"{name} must be a finite number{' > 0' if positive else ''}, got {value!r}")
+
+
+def _check_within(name: str, values: list[float], limits: str, lower: list[float], upper: list[float]) -> None:
+    """``lower[i] <= values[i] <= upper[i]``; the error names the entry."""
+    for i, (value, lo, hi) in enumerate(zip(values, lower, upper)):
+        if not lo <= hi:
+            raise ContractError(f"{limits}_lower[{i}] {lo} must be <= {limits}_upper[{i}] {hi}")
+        if not lo <= value <= hi:
+            raise ContractError(f"{name}[{i}] {value} must lie within {limits}_lower/_upper [{lo}, {hi}]")
 
 

@@ -9,7 +9,8 @@ with the mocap base orientation, which the observation builder rotates back); en
 from the robot's arm forward kinematics (base frame, placed in the world with the mocap base pose);
 goal height equal to the object's measured height (planar task). Actions become commands as in
 training: ``u_base = default + scale * a[0:6]``, ``q_arm = default + arm_scale * a[6:11]``, with
-``a`` clipped to ``+-action_clip``.
+``a`` clipped to ``+-action_clip``. Every command is clamped to its limits and checked before it leaves:
+one with a non-finite value (or beyond a limit) latches STOPPED and is replaced by a stop command.
 """
 
 from __future__ import annotations
@@ -36,13 +37,14 @@ ACTIVE_STATES = (State.RAMP, State.PUSH, State.HOLD, State.MOCAP_LOST)  # the ro
 
 
 def record_columns(leg_joints: int, locomotion_inputs: int) -> list[tuple[str, int]]:
-    """Tick log columns; leg and locomotion columns only with a locomotion ONNX."""
+    """Tick log columns; leg target and locomotion columns only with a locomotion ONNX. ``robot_state`` holds the
+    largest state the link accepts (with legs), NaN where the robot reports no leg joints."""
     columns = [
         ("time_s", 1), ("tick", 1), ("state", 1), ("mode", 1), ("lateness_s", 1), ("compute_s", 1), ("skipped", 1),
         ("base_age_s", 1), ("object_age_s", 1), ("robot_age_s", 1),
         ("base_position", 3), ("base_quat_xyzw", 4), ("object_position", 3), ("object_quat_xyzw", 4),
         ("goal", 3),  # x [m], y [m], yaw [rad]
-        ("robot_state", STATE_FIXED_VALUES + 2 * NUM_ARM_JOINTS + 2 * leg_joints),  # DPS1 value order
+        ("robot_state", STATE_FIXED_VALUES + 2 * NUM_ARM_JOINTS + 2 * NUM_LEG_JOINTS),  # DPS1 value order
         ("obs", POLICY_OBSERVATION_SIZE), ("actions", NUM_ACTIONS), ("base_command", 6), ("arm_targets", NUM_ARM_JOINTS),
     ]
     if locomotion_inputs:
@@ -136,7 +138,7 @@ class Controller:
         finite, tilt, actions = True, math.nan, None
         if robot is not None:
             values = robot.state.values()
-            view(self.record, "robot_state")[:] = values
+            view(self.record, "robot_state")[:values.size] = values  # onboard locomotion: legs reported or not
             finite = bool(np.isfinite(values).all())
             if finite and np.linalg.norm(robot.state.base_quat_xyzw) > 1e-9:
                 tilt = tilt_angle(robot.state.base_quat_xyzw)
@@ -167,16 +169,29 @@ class Controller:
             leg_targets = self.locomotion.step(robot.state, base_command)
             self.layout.view(self.record, "locomotion_obs")[:] = self.locomotion.model.input[0]
             self.layout.view(self.record, "locomotion_actions")[:] = self.locomotion.last_actions
-            if not np.isfinite(leg_targets).all():
-                state = self.safety.trip("non-finite locomotion output")
-                leg_targets = self._leg_hold.copy()
-        self.limits.clamp(base_command, arm_targets, leg_targets)
+        fault = self.limits.clamp(base_command, arm_targets, leg_targets)
+        if fault is not None:
+            state = self.safety.trip(fault)
+            base_command, arm_targets, leg_targets = self._stop_targets()
         if state in ACTIVE_STATES:
             self._arm_hold, self._leg_hold = arm_targets, leg_targets
             # a_{t-1} of the next observation: the policy's clipped output, or what was applied, as actions
             self._last_actions = clipped if clipped is not None else np.concatenate([
                 (base_command - self._base_default) / self._base_scale, (arm_targets - self._arm_default) / self._arm_scale])
         return state, base_command, arm_targets, leg_targets
+
+    def stop(self, now: float, reason: str) -> RobotCommand:
+        """Latches STOPPED with ``reason`` and returns the stop command (``now``: runtime clock [s]); for a tick that
+        could not finish."""
+        state = self.safety.trip(reason)
+        self._seq += 1
+        return RobotCommand(self._seq, now, MODE_STOP, int(state), *self._stop_targets())
+
+    def _stop_targets(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What a stop command carries: the default base command and the last targets that passed the check."""
+        targets = self._base_default.copy(), self._arm_hold.copy(), self._leg_hold.copy()
+        self.limits.clamp(*targets)  # finite: validated defaults, or targets that passed this check
+        return targets
 
     def _fill_record(self, timing: TickTiming, command: RobotCommand, base: TrackedPose | None, obj: TrackedPose | None,
                      goal: Goal | None, ages: tuple[float, float, float]) -> None:

@@ -104,7 +104,7 @@ def check_locomotion_contract(metadata: dict[str, str], cfg: OnnxLocomotionConfi
         if not same:
             problems.append(f"locomotion.onnx.{name}: config has {mine}, the network was trained with {value}")
     if problems:
-        raise StartupError("locomotion config does not match locomotion.onnx:\n  " + "\n  ".join(problems))
+        raise StartupError("locomotion config does not match locomotion.onnx: " + "; ".join(problems))
 
 _GRAVITY = np.array([0.0, 0.0, -1.0])
 

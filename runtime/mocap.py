@@ -22,8 +22,9 @@ import numpy as np
 from .config import MOTIONCAPTURE_SOURCES, MocapConfig
 from .errors import StartupError
 from .frames import Pose, PoseConverter
-from .packets import PacketError, decode_mocap
+from .packets import decode_mocap
 from .tick_log import read_log
+from .trust import Drops, SenderGuard
 from .udp import UdpEndpoint
 
 
@@ -34,9 +35,8 @@ class TrackedPose:
 
 
 @dataclass
-class MocapStats:
+class MocapStats(Drops):
     frames: int = 0  # frames (datagrams, mocap frames, log rows) taken in
-    malformed: int = 0  # datagrams dropped as malformed
     invalid: int = 0  # body poses dropped: non-finite values or a zero quaternion
 
 
@@ -78,7 +78,8 @@ class MocapSource:
 
 
 class UdpMocapSource(MocapSource):
-    """``DPM1`` datagrams on ``mocap.bind_address:mocap.port``; malformed ones are counted and dropped.
+    """``DPM1`` datagrams on ``mocap.bind_address:mocap.port`` from ``mocap.allowed_senders``; foreign, malformed
+    and replayed ones are counted and dropped (trust.py).
 
     A pose's receive time is the tick's time minus how long its datagram waited in the socket.
     """
@@ -86,14 +87,10 @@ class UdpMocapSource(MocapSource):
     def __init__(self, cfg: MocapConfig):
         super().__init__(cfg)
         self.endpoint = UdpEndpoint(cfg.bind_address, cfg.port)
+        self.guard = SenderGuard("mocap", cfg.allowed_senders)
 
     def poll(self, now: float) -> None:
-        for datagram in self.endpoint.drain():
-            try:
-                frame = decode_mocap(datagram.data)
-            except PacketError:
-                self.stats.malformed += 1
-                continue
+        for datagram, frame in self.guard.admit(self.endpoint.drain(), decode_mocap, self.stats):
             self.stats.frames += 1
             for body in frame.bodies:
                 self._accept(body.name, body.position, body.quat, now - datagram.waited_s)

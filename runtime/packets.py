@@ -2,9 +2,10 @@
 
 One datagram is one message. All integers and floats are little-endian; floats are IEEE float64.
 Every message starts with a 4-byte magic naming its kind and version and a ``uint32 seq`` (sender's
-counter, wraps). Decoders check the magic, the declared counts and the exact length, and raise
-:class:`PacketError` for anything else; they never check meaning (finite values, expected joint
-counts): the receivers do, and count what they drop.
+counter, wraps; a receiver drops a datagram whose seq is not newer than its sender's last, trust.py).
+Decoders check the magic, the declared counts and the exact length, and raise :class:`PacketError`
+for anything else; they never check meaning (finite values, expected joint counts): the receivers
+do, and count what they drop.
 
 ``DPM1`` mocap frame (mocap system or simulator -> runtime)::
 

@@ -90,10 +90,6 @@ def check_contract(contract: PolicyContract, cfg: RuntimeConfig) -> None:
     if not math.isclose(contract.control_period_s, cfg.control_period_s, rel_tol=1e-6):
         problems.append(f"control_period_s {contract.control_period_s} s differs from rates.control_hz"
                         f" {cfg.rates.control_hz} (period {cfg.control_period_s} s)")
-    if not contract.arm_action_scale > 0.0 or not contract.action_clip > 0.0:
-        problems.append(f"arm_action_scale {contract.arm_action_scale} and action_clip {contract.action_clip} must be > 0")
-    if any(s <= 0.0 for s in contract.base_command_scale):
-        problems.append(f"base_command_scale {contract.base_command_scale} must be > 0")
     s = cfg.safety
     for field, own, lower, upper in (
         ("safety.arm_joint", (s.arm_joint_lower, s.arm_joint_upper), contract.arm_joint_lower, contract.arm_joint_upper),
@@ -103,8 +99,7 @@ def check_contract(contract: PolicyContract, cfg: RuntimeConfig) -> None:
         if own[0] and (np.less(own[0], lower).any() or np.greater(own[1], upper).any()):
             problems.append(f"{field}_lower/_upper {own[0]} / {own[1]} must lie within the policy's {lower} / {upper}")
     if problems:
-        raise StartupError(f"push policy {cfg.push_policy.path} does not match the runtime config:\n  - "
-                           + "\n  - ".join(problems))
+        raise StartupError(f"push policy {cfg.push_policy.path} does not match the runtime config: " + "; ".join(problems))
 
 
 def load_push_policy(cfg: RuntimeConfig) -> tuple[OnnxModel, PolicyContract]:
@@ -112,7 +107,7 @@ def load_push_policy(cfg: RuntimeConfig) -> tuple[OnnxModel, PolicyContract]:
     model = OnnxModel(cfg.push_policy.path, INPUT_NAME, POLICY_OBSERVATION_SIZE, OUTPUT_NAME, NUM_ACTIONS, "push_policy")
     try:
         contract = PolicyContract.from_metadata(model.metadata)
-    except (ContractError, TypeError, ValueError) as error:  # malformed values raise TypeError/ValueError
+    except ContractError as error:
         raise StartupError(f"push_policy {cfg.push_policy.path}: {error}") from error
     check_contract(contract, cfg)
     return model, contract

@@ -15,7 +15,7 @@ from .config import NUM_LEG_JOINTS
 from .contract import INPUT_NAME, OUTPUT_NAME
 from .observation import NUM_ACTIONS, POLICY_OBSERVATION_SIZE
 from .policy import OnnxModel
-from .tick_log import TickLog, read_log
+from .tick_log import TickLog, TickLogError, read_log
 
 
 def _deviation(model: OnnxModel, log: TickLog, inputs: str, outputs: str) -> dict:
@@ -32,16 +32,26 @@ def _deviation(model: OnnxModel, log: TickLog, inputs: str, outputs: str) -> dic
             "worst_tick": worst_tick}
 
 
+def _logged(log: TickLog, log_path: str | Path, *keys: str) -> object:
+    """``meta["config"][keys[0]][keys[1]]...`` of the log's header; TickLogError naming the field if absent."""
+    value: object = log.meta
+    for key in ("config", *keys):
+        if not isinstance(value, dict) or key not in value:
+            raise TickLogError(f"{log_path}: the tick log's header lacks {'.'.join(keys) or 'the runtime config'}"
+                               " (not written by dynpush run or sim2sim)")
+        value = value[key]
+    return value
+
+
 def replay(log_path: str | Path, policy_path: str | Path | None = None) -> dict:
     """The deviation report of the module docstring, as a JSON-able dict."""
     log = read_log(log_path)
-    config = log.meta["config"]
-    push = OnnxModel(policy_path or config["push_policy"]["path"], INPUT_NAME, POLICY_OBSERVATION_SIZE, OUTPUT_NAME,
-                     NUM_ACTIONS, "push_policy")
+    push = OnnxModel(policy_path or _logged(log, log_path, "push_policy", "path"), INPUT_NAME, POLICY_OBSERVATION_SIZE,
+                     OUTPUT_NAME, NUM_ACTIONS, "push_policy")
     report = {"log": str(log_path), "records": log.records, "partial_bytes": log.partial_bytes,
               "push_policy": _deviation(push, log, "obs", "actions")}
     if "locomotion_obs" in log.columns:
-        onnx = config["locomotion"]["onnx"]
+        onnx = _logged(log, log_path, "locomotion", "onnx")
         model = OnnxModel(onnx["path"], onnx["input_name"], log.column("locomotion_obs").shape[1], onnx["output_name"],
                           NUM_LEG_JOINTS, "locomotion.onnx")
         report["locomotion"] = _deviation(model, log, "locomotion_obs", "locomotion_actions")

@@ -14,13 +14,13 @@ from typing import Protocol
 from .config import NUM_LEG_JOINTS, RobotConfig
 from .observation import NUM_ARM_JOINTS
 from .packets import PacketError, Proprioception, RobotCommand, decode_state, encode_command
+from .trust import Drops, SenderGuard
 from .udp import UdpEndpoint
 
 
 @dataclass
-class LinkStats:
-    states: int = 0  # well-formed state messages received
-    malformed: int = 0  # datagrams dropped: malformed, or joint counts other than the config's
+class LinkStats(Drops):
+    states: int = 0  # state messages admitted
     commands: int = 0  # commands sent
 
 
@@ -50,17 +50,19 @@ class RobotLink(Protocol):
 
 
 class UdpRobotLink:
-    """``DPS1`` in on ``robot.bind_address:robot.port``; ``DPC1`` out to ``robot.robot_address:robot_port``,
-    or, with an empty ``robot_address``, back to the sender of the latest state (simulators on loopback).
+    """``DPS1`` in on ``robot.bind_address:robot.port`` from ``robot.allowed_senders``; ``DPC1`` out to
+    ``robot.robot_address:robot_port``, or, with an empty ``robot_address``, back to the first admitted sender
+    of a state, which is then the only one admitted (simulators on loopback; trust.py).
 
-    ``leg_joints`` is the number of leg joints the state must carry (12 with a locomotion ONNX; 0
-    accepts 0 or 12). Datagrams with other counts are dropped as malformed.
+    ``leg_joints`` is the number of leg joints the state must carry (12 with a locomotion ONNX; 0, the
+    robot's own locomotion, accepts 0 or 12, DPS1's two forms). Datagrams with other counts are dropped as
+    malformed.
     """
 
     def __init__(self, cfg: RobotConfig, leg_joints: int):
         self.endpoint = UdpEndpoint(cfg.bind_address, cfg.port)
         self._address = (cfg.robot_address, cfg.robot_port) if cfg.robot_address else None
-        self._reply = not cfg.robot_address
+        self.guard = SenderGuard("robot", cfg.allowed_senders, latch=self._address is None)
         self._leg_counts = (leg_joints,) if leg_joints else (0, NUM_LEG_JOINTS)
         self._latest: ReceivedState | None = None
         self.stats = LinkStats()
@@ -69,24 +71,23 @@ class UdpRobotLink:
     def latest(self) -> ReceivedState | None:
         return self._latest
 
+    def _decode(self, data: bytes) -> Proprioception:
+        """A ``DPS1`` message with the joint counts this runtime takes; PacketError otherwise."""
+        state = decode_state(data)
+        if len(state.arm_q) != NUM_ARM_JOINTS or len(state.leg_q) not in self._leg_counts:
+            raise PacketError(f"DPS1 with {len(state.arm_q)} arm and {len(state.leg_q)} leg joints, this runtime takes"
+                              f" {NUM_ARM_JOINTS} arm and {' or '.join(map(str, self._leg_counts))} leg joints")
+        return state
+
     def poll(self, now: float) -> None:
-        for datagram in self.endpoint.drain():
-            try:
-                state = decode_state(datagram.data)
-            except PacketError:
-                self.stats.malformed += 1
-                continue
-            if len(state.arm_q) != NUM_ARM_JOINTS or len(state.leg_q) not in self._leg_counts:
-                self.stats.malformed += 1
-                continue
+        for datagram, state in self.guard.admit(self.endpoint.drain(), self._decode, self.stats):
             self.stats.states += 1
             self._latest = ReceivedState(state, now - datagram.waited_s)
-            if self._reply:
-                self._address = datagram.sender
 
     def send(self, command: RobotCommand) -> None:
-        if self._address is not None:
-            self.endpoint.send(encode_command(command), self._address)
+        address = self._address or self.guard.peer
+        if address is not None:
+            self.endpoint.send(encode_command(command), address)
             self.stats.commands += 1
 
     def wait_for_state(self, timeout_s: float) -> bool:

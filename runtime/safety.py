@@ -11,8 +11,9 @@ States (:class:`State`) and what the robot is told in each:
 - ``MOCAP_LOST``: base or object pose older than ``mocap.timeout_s``: base command zero, arm holds.
   Fresh poses resume the previous activity.
 - ``STOPPED`` (latched until restart): robot state older than ``robot.timeout_s``, base tilt (IMU)
-  beyond ``safety.max_tilt_deg``, or a non-finite number anywhere in the tick: command mode stop
-  (damping on hardware).
+  beyond ``safety.max_tilt_deg``, a non-finite number anywhere in the tick, or an outgoing command
+  that is not finite or lies beyond its limits after clamping (:meth:`CommandLimits.clamp`):
+  command mode stop (damping on hardware).
 
 Transitions: STARTUP -> RAMP on the first robot state; RAMP -> PUSH/HOLD/MOCAP_LOST when the ramp
 ends; PUSH <-> HOLD <-> MOCAP_LOST as above; any -> STOPPED. Joint targets and the base command are
@@ -133,9 +134,18 @@ class CommandLimits:
             leg_upper=pick(s.leg_joint_upper, []),
         )
 
-    def clamp(self, base_command: np.ndarray, arm_targets: np.ndarray, leg_targets: np.ndarray) -> None:
-        """Clamps the three arrays in place."""
-        np.clip(base_command, self.base_lower, self.base_upper, out=base_command)
-        np.clip(arm_targets, self.arm_lower, self.arm_upper, out=arm_targets)
-        if leg_targets.size:
-            np.clip(leg_targets, self.leg_lower, self.leg_upper, out=leg_targets)
+    def clamp(self, base_command: np.ndarray, arm_targets: np.ndarray, leg_targets: np.ndarray) -> str | None:
+        """Clamps the three arrays in place; returns why the command must not be sent, or None: a non-finite value
+        (judged before clamping, which would turn an infinity into a limit) or a value beyond its limit after."""
+        blocks = (("base command", base_command, self.base_lower, self.base_upper),
+                  ("arm targets", arm_targets, self.arm_lower, self.arm_upper),
+                  ("leg targets", leg_targets, self.leg_lower, self.leg_upper))
+        for name, values, _, _ in blocks:
+            if not np.isfinite(values).all():
+                return f"{name} {values.tolist()} not finite"
+        for name, values, lower, upper in blocks:
+            if values.size:
+                np.clip(values, lower, upper, out=values)
+                if not (np.all(lower <= values) and np.all(values <= upper)):
+                    return f"{name} {values.tolist()} beyond the limits {lower.tolist()} / {upper.tolist()}"
+        return None

@@ -4,8 +4,8 @@ This process runs :class:`~dynpush.runtime.app.Runtime` (numpy + onnxruntime onl
 (``dynpush.sim.sim2sim``: Newton, Warp, torch) runs in a child process and plays the robot and the
 mocap system over loopback UDP. The runtime's config is the given one (or the defaults) with the
 parts that wire it to the simulator replaced: mocap source ``udp`` on an ephemeral loopback port with
-bodies ``base`` and ``object`` in the runtime's conventions, the robot link on an ephemeral port
-replying to the simulator, goals from ``DPG1`` commands only, the locomotion and the clock (real time by
+bodies ``base`` and ``object`` in the runtime's conventions, the robot link on an ephemeral loopback port
+taking state from loopback only and replying to the simulator, goals from ``DPG1`` commands only, the locomotion and the clock (real time by
 default, lock-step on request).
 
 Locomotion: ``onboard`` (default), the simulator's tracked base takes the 6D command; or a locomotion ONNX
@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .app import Runtime
-from .config import GoalsConfig, MocapConfig, RuntimeConfig, RuntimeConfigError, load_config
+from .config import LOOPBACK, GoalsConfig, MocapConfig, RuntimeConfig, RuntimeConfigError, load_config
 from .locomotion import read_locomotion_contract
 
 EVENT_PREFIX = "SIM2SIM "
@@ -75,7 +75,8 @@ def runtime_config(options: SimToSimOptions) -> RuntimeConfig:
         cfg.safety.leg_joint_lower = [float(v) for v in contract["joint_lower"]]
         cfg.safety.leg_joint_upper = [float(v) for v in contract["joint_upper"]]
     cfg.mocap = MocapConfig(source="udp", port=0, timeout_s=cfg.mocap.timeout_s)
-    cfg.robot.bind_address, cfg.robot.port, cfg.robot.robot_address = "127.0.0.1", 0, ""
+    cfg.robot.bind_address, cfg.robot.port, cfg.robot.robot_address = LOOPBACK, 0, ""
+    cfg.robot.allowed_senders = [LOOPBACK]  # the simulator, whatever robot the config names
     cfg.goals = GoalsConfig(command_port=0)
     cfg.rates.clock = "lockstep" if options.lockstep else "realtime"
     cfg.log.directory = options.log_dir

@@ -7,10 +7,11 @@ File layout::
     header                     UTF-8 JSON: {"columns": [[name, size], ...], "meta": {...}}
     records                    each sum(sizes) little-endian float64 values, columns in header order
 
-The header is written and flushed before the first record; records go through a buffer that reaches
-the operating system at least every ``flush_s`` seconds (wall clock), so a process that is killed
-loses at most that much. A reader drops a trailing partial record. Integers (tick index, state
-code) are stored as exact float64 values; "no value" is NaN.
+A log file is created exclusively: a run never overwrites another's log (two runs started in the same
+second get ``NAME.dplog`` and ``NAME-2.dplog``). The header is written and flushed before the first
+record; records go through a buffer that reaches the operating system at least every ``flush_s``
+seconds (wall clock), so a process that is killed loses at most that much. A reader drops a trailing
+partial record. Integers (tick index, state code) are stored as exact float64 values; "no value" is NaN.
 """
 
 from __future__ import annotations
@@ -24,12 +25,14 @@ from pathlib import Path
 
 import numpy as np
 
+from dynpush.errors import MissingFileError, UserError
+
 MAGIC = b"DPLOG1\n"
 _LENGTH = struct.Struct("<I")
 _F64 = np.dtype("<f8")
 
 
-class TickLogError(ValueError):
+class TickLogError(UserError, ValueError):
     """A file that is not a tick log."""
 
 
@@ -55,19 +58,32 @@ class RecordLayout:
 
 
 class TickLogWriter:
-    """Appends records to a new tick log at ``path`` (its folder is created)."""
+    """Appends records to a new tick log at ``path`` (its folder is created; FileExistsError if the file exists)."""
 
     def __init__(self, path: str | Path, layout: RecordLayout, meta: dict, flush_s: float = 1.0):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._layout = layout
         self._flush_s = flush_s
-        self._file = open(self.path, "wb", buffering=1 << 20)  # noqa: SIM115 (kept open for the whole run)
+        self._file = open(self.path, "xb", buffering=1 << 20)  # noqa: SIM115 (kept open for the whole run)
         header = json.dumps({"columns": layout.columns, "meta": meta}, default=_jsonable).encode("utf-8")
         self._file.write(MAGIC + _LENGTH.pack(len(header)) + header)
         self._file.flush()
         self._last_flush = time.monotonic()
         self.records = 0
+
+    @classmethod
+    def new_in(cls, directory: str | Path, stem: str, layout: RecordLayout, meta: dict,
+               flush_s: float = 1.0) -> TickLogWriter:
+        """A new log ``directory/stem.dplog``, or ``stem-2.dplog``, ``stem-3.dplog``... where that name is taken."""
+        Path(directory).mkdir(parents=True, exist_ok=True)  # here, so that a file in its place is no taken name
+        count = 1
+        while True:
+            name = f"{stem}.dplog" if count == 1 else f"{stem}-{count}.dplog"
+            try:
+                return cls(Path(directory) / name, layout, meta, flush_s)
+            except FileExistsError:
+                count += 1
 
     def write(self, record: np.ndarray) -> None:
         if record.shape != (self._layout.size,):
@@ -109,7 +125,12 @@ class TickLog:
 
 
 def read_log(path: str | Path) -> TickLog:
-    data = Path(path).read_bytes()
+    try:
+        data = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise MissingFileError(f"tick log {path} does not exist") from None
+    except OSError as error:
+        raise TickLogError(f"cannot read tick log {path}: {error}") from error
     if not data.startswith(MAGIC) or len(data) < len(MAGIC) + _LENGTH.size:
         raise TickLogError(f"{path} is not a dynpush tick log (magic {MAGIC!r} missing)")
     (length,) = _LENGTH.unpack_from(data, len(MAGIC))
@@ -120,9 +141,12 @@ def read_log(path: str | Path) -> TickLog:
         header = json.loads(data[len(MAGIC) + _LENGTH.size:start].decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as error:
         raise TickLogError(f"{path}: the tick log header is not valid JSON: {error}") from error
-    layout = RecordLayout(header["columns"])
+    try:
+        layout, meta = RecordLayout(header["columns"]), header["meta"]
+    except (KeyError, TypeError, ValueError) as error:
+        raise TickLogError(f"{path}: the tick log header lacks its columns or meta ({error!r})") from error
     body = len(data) - start
     records = body // (8 * layout.size)
     values = np.frombuffer(data, dtype=_F64, count=records * layout.size, offset=start).reshape(records, layout.size)
     columns = {name: values[:, layout.slices[name]] for name, _ in layout.columns}
-    return TickLog(meta=header["meta"], columns=columns, records=records, partial_bytes=body - records * 8 * layout.size)
+    return TickLog(meta=meta, columns=columns, records=records, partial_bytes=body - records * 8 * layout.size)

@@ -11,10 +11,12 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
+from dynpush.errors import UserError
+
 SOLVERS = ("xpbd", "mujoco")
 
 
-class ConfigError(ValueError):
+class ConfigError(UserError, ValueError):
     """An invalid configuration value; the message names the field and the allowed values."""
 
 

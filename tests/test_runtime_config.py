@@ -1,5 +1,6 @@
-"""Runtime config validation (errors name the field and the allowed values) and start-up checks of the
-push policy against the config (contract, ONNX input/output names and shapes) and of a locomotion ONNX."""
+"""Runtime config validation (errors name the field and the allowed values: network settings, non-finite, unbounded
+or wrongly typed values) and start-up checks of the push policy (its contract's own numbers, the contract against the
+config, ONNX input/output names and shapes) and of a locomotion ONNX."""
 
 from pathlib import Path
 
@@ -70,6 +71,43 @@ def test_invalid_configs_name_field_and_allowed_values(data, message):
         config_from_dict(data)
 
 
+@pytest.mark.parametrize("data, message", [
+    (minimal(robot={"bind_address": "0.0.0.0"}), r"robot.bind_address must name one interface's address .* not '0.0.0.0'"),
+    (minimal(goals={"bind_address": "0.0.0.0"}), "goals.bind_address must name one interface's address"),
+    (minimal(mocap={"bind_address": "robot.local"}), "mocap.bind_address must be an IPv4 address"),
+    (minimal(mocap={"allowed_senders": []}), "mocap.allowed_senders must list at least one sender address"),
+    (minimal(robot={"allowed_senders": ["127.0.0.1", "10.0.0.300"]}), r"robot.allowed_senders\[1\] must be an IPv4"),
+    (minimal(robot={"robot_address": "the-robot"}), "robot.robot_address must be an IPv4 address"),
+    (minimal(goals={"workspace": {"x_min": 2.0, "x_max": -2.0}}), "goals.workspace.x_min and goals.workspace.x_max must"),
+    (minimal(goals={"sequence": [{"x": 1e6, "y": -1e6}]}), r"goals.sequence\[0\]: x 1000000.0 m outside the workspace"),
+    (minimal(goals={"sequence": [{"x": float("nan")}]}), r"goals.sequence\[0\]: x nan not finite"),
+])
+def test_network_settings_and_goals_are_checked(data, message):
+    """Sockets bind to one named address and take datagrams from listed senders; goals lie in the workspace."""
+    with pytest.raises(RuntimeConfigError, match=message):
+        config_from_dict(data)
+
+
+@pytest.mark.parametrize("data, message", [
+    (minimal(mocap={"base_offset": {"position": [float("nan"), 0.0, 0.0]}}),
+     r"mocap.base_offset.position\[0\] must be finite, got nan"),
+    (minimal(mocap={"object_offset": {"quat_xyzw": [0.0, 0.0, float("inf"), 1.0]}}),
+     r"mocap.object_offset.quat_xyzw\[2\] must be finite"),
+    (minimal(mocap={"timeout_s": 1e9}), "mocap.timeout_s must be <= 1.0, got 1000000000.0"),
+    (minimal(robot={"timeout_s": 1e9}), "robot.timeout_s must be <= 1.0"),
+    (minimal(safety={"arm_ramp_s": 1e9}), "safety.arm_ramp_s must be <= 60.0"),
+    (minimal(goals={"sequence": [{"x": 1.0}], "advance_after_s": 1e9}), r"goals.advance_after_s must be null or a number"),
+    (minimal(locomotion=onnx_locomotion(default_joint_positions=[float("nan")] * 12)),
+     r"locomotion.onnx.default_joint_positions\[0\] must be finite"),
+    (minimal(mocap={"options": {"rigid_bodies": ["base", "object"]}}), "mocap.options.rigid_bodies must be of type str"),
+    (minimal(robot={"arm_joint_names": ["SH_ROT", "SH_FLE", 3, "FA_ROT", "WRIST_1"]}),
+     r"robot.arm_joint_names\[2\] must be of type str, got 3"),
+])
+def test_non_finite_unbounded_or_wrongly_typed_values_name_their_field(data, message):
+    with pytest.raises(RuntimeConfigError, match=message):
+        config_from_dict(data)
+
+
 def test_defaults_and_yaml_loading(tmp_path):
     cfg = config_from_dict(minimal())
     assert cfg.mocap.bind_address == "127.0.0.1" and cfg.rates.control_hz == 50.0 and cfg.rates.clock == "realtime"
@@ -112,6 +150,27 @@ def test_contract_mismatch_stops_startup(tmp_path, changes, message):
     with pytest.raises(StartupError, match=message):
         Runtime(cfg)
     assert not (tmp_path / "logs").exists(), "start-up checks come before any socket or log is opened"
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"base_command_default": [0.0, 0.0, 0.0, 0.0, 0.0, float("nan")]}, r"base_command_default\[5\] must be a finite"
+     " number, got nan"),
+    ({"base_command_scale": [1.0, float("inf"), 1.0, 0.2, 0.2, 0.1]}, r"base_command_scale\[1\] must be a finite number > 0"),
+    ({"base_command_lower": [2.0, -0.6, -1.0, -0.2, -0.2, 0.4]}, r"base_command_lower\[0\] 2.0 must be <= base_command_upper"),
+    ({"arm_default_joint_positions": [0.0, 1.0, 2.1, 0.0, 0.6]}, r"arm_default_joint_positions\[1\] 1.0 must lie within"
+     r" arm_joint_lower/_upper \[-2.5, 0.5\]"),
+    ({"action_clip": float("nan")}, "action_clip must be a finite number > 0, got nan"),
+    ({"arm_joint_upper": [3.0, 0.5, "far", 3.0, 2.0]}, r"arm_joint_upper\[2\] must be a finite number, got 'far'"),
+    ({"base_command_lower": 5}, "base_command_lower must have 6 entries, got 5"),
+])
+def test_nan_or_inverted_contract_numbers_stop_startup(tmp_path, changes, message):
+    """The policy's own numbers are checked before anything opens: one line naming the file and the field."""
+    path = write_policy(tmp_path / "p.onnx", contract(**changes))
+    cfg = config_from_dict(minimal(push_policy={"path": str(path)}, log={"directory": str(tmp_path / "logs")}))
+    with pytest.raises(StartupError, match=message) as error:
+        Runtime(cfg)
+    assert str(error.value).startswith(f"push_policy {path}: ") and "\n" not in str(error.value)
+    assert not (tmp_path / "logs").exists()
 
 
 def test_config_limits_must_lie_within_the_contract(tmp_path):

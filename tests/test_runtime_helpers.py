@@ -96,10 +96,12 @@ class FakeRobot(threading.Thread):
         self.mocap_on = True
         self.state_on = True
         self.commands: list[RobotCommand] = []
+        self.goal_seq = 0
         self.halt = threading.Event()
 
     def send_goal(self, x: float, y: float, yaw: float, kind: int = GOAL_SET) -> None:
-        self.endpoint.send(encode_goal(GoalCommand(0, kind, x, y, yaw)), self.goal_address)
+        self.goal_seq += 1
+        self.endpoint.send(encode_goal(GoalCommand(self.goal_seq, kind, x, y, yaw)), self.goal_address)
 
     def _answer(self, step: int) -> None:
         if self.script is not None:

@@ -1,6 +1,7 @@
 """The tick log survives a killed process (write, SIGKILL, read back), drops a torn last record, and feeds
 ``dynpush replay`` (zero deviation for the logged policy, the largest deviation for another) and the
-replay mocap source."""
+replay mocap source; runs started in the same second never overwrite each other's log, and an unwritable
+log folder or a log without its config end in one line naming them."""
 
 import contextlib
 import io
@@ -15,12 +16,18 @@ import numpy as np
 import pytest
 
 from dynpush.cli import main
+from dynpush.runtime import app as runtime_app
+from dynpush.runtime.app import Runtime
 from dynpush.runtime.config import MocapConfig
+from dynpush.runtime.errors import StartupError
 from dynpush.runtime.mocap import ReplayMocapSource
 from dynpush.runtime.replay import replay
 from dynpush.runtime.safety import State
 from dynpush.runtime.tick_log import RecordLayout, TickLogError, TickLogWriter, read_log
-from test_runtime_helpers import FakeRobot, lockstep_config, run_with_robot, streaming_config, write_policy
+from dynpush.runtime.udp import UdpEndpoint
+from test_runtime_helpers import (
+    FakeRobot, free_ports, lockstep_config, run_with_robot, streaming_config, write_policy,
+)
 
 
 def test_log_survives_sigkill(tmp_path):
@@ -70,6 +77,39 @@ def test_torn_record_is_dropped_and_foreign_files_rejected(tmp_path):
         TickLogWriter(tmp_path / "c.dplog", layout, {}).write(np.zeros(3))
 
 
+def test_tick_logs_started_in_the_same_second_never_overwrite_each_other(tmp_path, monkeypatch):
+    layout = RecordLayout([("time_s", 1)])
+    first = TickLogWriter.new_in(tmp_path, "runtime-same-second", layout, {"run": 1})
+    second = TickLogWriter.new_in(tmp_path, "runtime-same-second", layout, {"run": 2})
+    for writer in (first, second):
+        writer.write(np.zeros(1))
+        writer.close()
+    assert (first.path.name, second.path.name) == ("runtime-same-second.dplog", "runtime-same-second-2.dplog")
+    with pytest.raises(FileExistsError):
+        TickLogWriter(first.path, layout, {"run": 3})  # never opened for writing again
+    assert [read_log(w.path).meta["run"] for w in (first, second)] == [1, 2]
+
+    monkeypatch.setattr(runtime_app.time, "strftime", lambda _: "same-second")  # two runs, one clock second
+    cfg = lockstep_config(write_policy(tmp_path / "p.onnx"), tmp_path / "logs")
+    paths = []
+    for _ in range(2):
+        runtime = Runtime(cfg)
+        runtime.run(max_ticks=0)
+        paths.append(runtime.log.path)
+    assert paths[0] != paths[1] and all(read_log(path).meta["config"] for path in paths)
+
+
+def test_unwritable_log_directory_stops_startup_naming_the_field(tmp_path):
+    (tmp_path / "taken").write_text("a file where the log folder should be")
+    ports = free_ports(3)
+    cfg = lockstep_config(write_policy(tmp_path / "p.onnx"), tmp_path / "taken", mocap={"port": ports[0]},
+                          robot={"port": ports[1]}, goals={"command_port": ports[2]})
+    with pytest.raises(StartupError, match=f"log.directory {tmp_path / 'taken'}: cannot create a tick log there"):
+        Runtime(cfg)
+    for port in ports:  # the sockets opened before the failure were closed again
+        UdpEndpoint("127.0.0.1", port).close()
+
+
 @pytest.fixture(scope="module")
 def pushing_log(tmp_path_factory):
     tmp_path = tmp_path_factory.mktemp("replay")
@@ -96,6 +136,17 @@ def test_replay_reproduces_the_logged_actions(pushing_log):
         assert main(["replay", str(path)]) == 0
     assert json.loads(stdout.getvalue())["push_policy"]["max_abs_deviation"] == 0.0
     assert main(["replay", str(tmp_path / "p.onnx")]) == 2, "not a log: message and exit status 2"
+
+
+def test_replay_of_a_log_without_its_config_names_what_is_missing(tmp_path, capsys):
+    layout = RecordLayout([("obs", 54), ("actions", 11)])
+    TickLogWriter(tmp_path / "bare.dplog", layout, {"note": "written by another tool"}).close()
+    assert main(["replay", str(tmp_path / "bare.dplog")]) == 2
+    err = capsys.readouterr().err
+    assert err == f"dynpush: {tmp_path / 'bare.dplog'}: the tick log's header lacks push_policy.path (not written by" \
+                  " dynpush run or sim2sim)\n"
+    assert main(["replay", str(tmp_path / "none.dplog")]) == 2
+    assert capsys.readouterr().err == f"dynpush: tick log {tmp_path / 'none.dplog'} does not exist\n"
 
 
 def test_replay_mocap_source_repeats_the_recorded_stream(pushing_log):

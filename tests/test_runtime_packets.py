@@ -118,7 +118,8 @@ def test_listening_sockets_count_and_drop_garbage():
     assert mocap.stats.malformed == 60 + 3 and mocap.stats.frames == 1
     assert mocap.base is not None and mocap.object is None, "only the configured bodies are kept ('objekt ü' is not)"
     assert link.stats.malformed == 60 + 1 + 3 and link.stats.states == 1 and link.latest.state.seq == 5
-    assert goals.malformed == 60 + 1 + 3 and goals.commands == 1 and goals.goal.x == 1.0
+    assert goals.stats.malformed == 60 + 3 and goals.stats.refused == 1, "the NaN goal is well-formed, but no goal"
+    assert goals.stats.accepted == 1 and goals.goal.x == 1.0
     for closable in (mocap, link, goals, sender):
         closable.close()
 

@@ -1,5 +1,6 @@
 """Safety state machine transitions (stale mocap, stale robot state, NaN, attitude, success, new goal), the
-controller's outputs in each state (ramp, hold, clamping, stop), a locomotion ONNX, and frame conversion."""
+controller's outputs in each state (ramp, hold, clamping, stop), the check of every outgoing command, a locomotion
+ONNX, and frame conversion."""
 
 import math
 
@@ -15,7 +16,7 @@ from dynpush.runtime.mocap import TrackedPose
 from dynpush.runtime.packets import MODE_STOP, MODE_TARGETS
 from dynpush.runtime.policy import load_push_policy
 from dynpush.runtime.robot_link import ReceivedState
-from dynpush.runtime.safety import SafetyInputs, SafetyMachine, State
+from dynpush.runtime.safety import CommandLimits, SafetyInputs, SafetyMachine, State
 from dynpush.runtime.timing import TickTiming
 from test_runtime_helpers import ARM_DEFAULT, contract, robot_state, write_gemm, write_policy
 
@@ -77,11 +78,11 @@ def test_stop_conditions_latch_from_every_state(state, bad, reason):
 
 
 # ---------------------------------------------------------------------------------------------- controller
-def controller(tmp_path, bias=None, locomotion=False, **sections) -> Controller:
+def controller(tmp_path, bias=None, locomotion=False, leg_output=10.0, **sections) -> Controller:
     policy = write_policy(tmp_path / "p.onnx", bias=bias)
     data = {"push_policy": {"path": str(policy)}, "safety": {"arm_ramp_s": 1.0}}
     if locomotion:
-        write_gemm(tmp_path / "loco.onnx", 3 + 6 + 12 + 5, 12, scale=0.0, bias=np.full(12, 10.0))
+        write_gemm(tmp_path / "loco.onnx", 3 + 6 + 12 + 5, 12, scale=0.0, bias=np.full(12, leg_output))
         data |= {"locomotion": {"mode": "onnx", "onnx": {
             "path": str(tmp_path / "loco.onnx"), "joint_names": LEGS, "default_joint_positions": [0.1] * 12,
             "observation": [{"name": "projected_gravity_b"}, {"name": "base_command", "scale": 2.0},
@@ -190,6 +191,28 @@ def test_locomotion_onnx_sends_12_leg_and_5_arm_targets(tmp_path):
     np.testing.assert_allclose(obs[:3], [0, 0, -1], err_msg="projected gravity from the IMU")
     np.testing.assert_allclose(obs[3:9], 2.0 * command.base_command, rtol=1e-6, err_msg="scaled base command")
     np.testing.assert_allclose(obs[9:21], -0.1, rtol=1e-6, err_msg="leg positions relative to the default")
+
+
+@pytest.mark.parametrize("leg_output", [np.nan, np.inf])
+def test_a_command_that_is_not_finite_is_never_sent(tmp_path, leg_output):
+    """The last check before a command leaves: a locomotion network gone NaN or infinite (clamping keeps a NaN a NaN)
+    latches STOPPED, and the stop command carries the last targets that passed."""
+    ticks = Ticks(controller(tmp_path, locomotion=True, leg_output=leg_output, safety={"arm_ramp_s": 0.02}), legs=12)
+    command = ticks()
+    assert command.state == State.STOPPED and command.mode == MODE_STOP
+    assert ticks.ctrl.safety.reason.startswith("leg targets [") and ticks.ctrl.safety.reason.endswith("not finite")
+    values = np.concatenate([command.base_command, command.arm_targets, command.leg_targets])
+    assert np.isfinite(values).all()
+    np.testing.assert_allclose(command.leg_targets, 0.1, err_msg="the default leg pose, clamped")
+
+
+def test_command_limits_clamp_and_name_what_must_not_be_sent():
+    limits = CommandLimits(np.zeros(6), np.ones(6), np.zeros(5), np.ones(5), np.zeros(0), np.zeros(0))
+    base, arm = np.full(6, 0.5), np.full(5, 1.5)
+    assert limits.clamp(base, arm, np.zeros(0)) is None and (arm == 1.0).all()
+    assert limits.clamp(np.array([0.5, np.inf, 0.5, 0.5, 0.5, 0.5]), arm, np.zeros(0)).startswith("base command")
+    inverted = CommandLimits(np.zeros(6), np.ones(6), np.ones(5), np.zeros(5), np.zeros(0), np.zeros(0))
+    assert "beyond the limits" in inverted.clamp(base, np.full(5, 0.5), np.zeros(0))
 
 
 # ---------------------------------------------------------------------------------------------- frames

@@ -39,8 +39,9 @@ def test_sim2sim_end_to_end(robot_policy, tmp_path):
     assert report["episodes"] == 1 and report["success_rate"] in (0.0, 1.0)
     assert report["episode_results"][0]["steps"] == 50, "1 s episode at 50 Hz"
     runtime = report["runtime"]
-    assert runtime["states"]["PUSH"] >= 45 and runtime["goal_commands"] == {"accepted": 1, "malformed": 0}
-    assert runtime["robot_link"]["malformed"] == 0 and runtime["mocap"]["malformed"] == 0
+    assert runtime["states"]["PUSH"] >= 45 and runtime["goal_commands"]["accepted"] == 1
+    for stream in ("robot_link", "mocap", "goal_commands"):
+        assert runtime[stream]["malformed"] == runtime[stream]["foreign"] == runtime[stream]["replayed"] == 0, stream
     sent = runtime["robot_link"]["states"]  # one state and, unless dropped, one mocap frame per simulator step
     assert 0.75 * sent <= runtime["mocap"]["frames"] <= 0.97 * sent, "about 10 % of the mocap frames dropped"
 
@@ -65,9 +66,11 @@ def test_sim2sim_ends_when_the_runtime_stops(robot_policy, tmp_path):
 
 def test_sim2sim_wiring_replaces_the_config(robot_policy, tmp_path):
     config = tmp_path / "runtime.yaml"
-    config.write_text(json.dumps({"mocap": {"source": "vicon", "timeout_s": 0.3}, "goals": {"sequence": [{"x": 1.0}]}}))
+    config.write_text(json.dumps({"mocap": {"source": "vicon", "timeout_s": 0.3}, "goals": {"sequence": [{"x": 1.0}]},
+                                  "robot": {"bind_address": "192.168.1.5", "allowed_senders": ["192.168.1.20"]}}))
     cfg = runtime_config(SimToSimOptions(policy=str(robot_policy), config=str(config), lockstep=True))
     assert cfg.mocap.source == "udp" and cfg.mocap.port == 0 and cfg.mocap.timeout_s == 0.3
+    assert cfg.robot.bind_address == "127.0.0.1" and cfg.robot.allowed_senders == ["127.0.0.1"], "the simulator's link"
     assert cfg.goals.sequence == [] and cfg.goals.command_port == 0 and cfg.rates.clock == "lockstep"
     assert cfg.robot.robot_address == "" and cfg.push_policy.path == str(robot_policy.resolve())
     legs = [f"{leg}_{joint}" for leg in ("LF", "RF", "LH", "RH") for joint in ("HAA", "HFE", "KFE")]

@@ -23,17 +23,19 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from dynpush.errors import MissingFileError
+
 SHIPPED_DIR = Path(__file__).resolve().parent
 LOCOMOTION_DIR = SHIPPED_DIR / "locomotion"
 
 
 def shipped_file(name: str) -> Path:
-    """The shipped file ``name`` (e.g. ``policy.onnx``, ``locomotion/locomotion.onnx``); FileNotFoundError naming it
+    """The shipped file ``name`` (e.g. ``policy.onnx``, ``locomotion/locomotion.onnx``); a MissingFileError naming it
     when absent."""
     path = SHIPPED_DIR / name
     if not path.is_file():
-        raise FileNotFoundError(f"{path} is missing: this dynpush installation ships no {name}"
-                                " (write it with dynpush ship RUN)")
+        raise MissingFileError(f"{path} is missing: this dynpush installation ships no {name}"
+                               " (write it with dynpush ship RUN)")
     return path
 
 

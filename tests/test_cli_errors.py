@@ -1,0 +1,91 @@
+"""User errors end ``dynpush`` with one line naming the file or field and exit status 2, never a traceback: missing or
+corrupt run folders, checkpoints, policies and tick logs, a crafted checkpoint, invalid runtime configs."""
+
+import json
+import os
+
+import pytest
+import torch
+
+from dynpush.cli import main
+from test_runtime_helpers import write_policy
+
+
+class RunsCode:
+    def __init__(self, marker):
+        self.marker = marker
+
+    def __reduce__(self):
+        return os.system, (f"touch {self.marker}",)
+
+
+def one_line_error(capsys, argv: list[str]) -> str:
+    """The stderr of ``dynpush argv``, which must fail with status 2 and exactly one line."""
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("dynpush: ") and err.count("\n") == 1 and "Traceback" not in err, err
+    return err
+
+
+@pytest.fixture
+def run(tmp_path):
+    """A run folder with a valid config.json and no checkpoint yet."""
+    from dynpush.policies.train import TrainConfig
+
+    folder = tmp_path / "run"
+    folder.mkdir()
+    (folder / "config.json").write_text(json.dumps(TrainConfig.preset_config("cpu").to_dict()))
+    return folder
+
+
+def test_export_of_missing_or_corrupt_run_files(run, tmp_path, capsys):
+    assert f"{tmp_path / 'none' / 'config.json'} not found" in one_line_error(capsys, ["export", str(tmp_path / "none")])
+    assert "checkpoint model_*.pt not found in" in one_line_error(capsys, ["export", str(run)])
+    (run / "model_3.pt").write_bytes(b"PK\x03\x04" + bytes(40))  # a zip cut short
+    assert f"cannot read checkpoint {run / 'model_3.pt'}" in one_line_error(capsys, ["export", str(run)])
+    (run / "config.json").write_text('{"iterations": 3,')
+    assert f"{run / 'config.json'} is not readable JSON" in one_line_error(capsys, ["export", str(run)])
+
+
+def test_export_refuses_a_crafted_checkpoint_without_running_it(run, tmp_path, capsys):
+    marker = tmp_path / "code_ran"
+    torch.save({"actor_state_dict": RunsCode(marker), "iter": 1}, run / "model_1.pt")
+    err = one_line_error(capsys, ["export", str(run)])
+    assert f"checkpoint {run / 'model_1.pt'} refused: it would import {os.system.__module__}.system" in err
+    assert not marker.exists() and not (run / "policy.onnx").exists()
+
+
+@pytest.mark.parametrize("command", ["play", "eval"])
+def test_play_and_eval_of_a_missing_policy(tmp_path, capsys, command):
+    assert f"ONNX file {tmp_path / 'none.onnx'} not found" in one_line_error(capsys, [command, str(tmp_path / "none.onnx")])
+
+
+def test_play_of_a_corrupt_or_foreign_policy(tmp_path, capsys):
+    (tmp_path / "junk.onnx").write_bytes(b"\x08\x07 not a model")
+    assert f"{tmp_path / 'junk.onnx'} is not an ONNX model" in one_line_error(capsys, ["play", str(tmp_path / "junk.onnx")])
+
+
+def test_imitate_resume_without_its_data(tmp_path, capsys):
+    err = one_line_error(capsys, ["imitate", "--runs", str(tmp_path), "--name", "bc", "--resume"])
+    assert f"--resume: no {tmp_path / 'bc' / 'imitation_data.pt'}" in err
+
+
+@pytest.mark.parametrize("section, message", [
+    ({"mocap": {"base_offset": {"position": [float("nan"), 0.0, 0.0]}}}, r"mocap.base_offset.position[0] must be finite"),
+    ({"robot": {"timeout_s": 1e9}}, "robot.timeout_s must be <= 1.0"),
+    ({"robot": {"bind_address": "0.0.0.0"}}, "robot.bind_address must name one interface's address"),
+    ({"push_policy": {"path": "none.onnx"}}, "push_policy: ONNX file"),
+])
+def test_run_with_an_invalid_config(tmp_path, capsys, section, message):
+    config = {"push_policy": {"path": str(write_policy(tmp_path / "p.onnx"))}, "log": {"directory": str(tmp_path)}}
+    (tmp_path / "runtime.yaml").write_text(json.dumps(config | section))
+    assert message in one_line_error(capsys, ["run", str(tmp_path / "runtime.yaml")])
+
+
+def test_run_with_an_unwritable_log_directory(tmp_path, capsys):
+    (tmp_path / "taken").write_text("a file")
+    config = {"push_policy": {"path": str(write_policy(tmp_path / "p.onnx"))}, "log": {"directory": str(tmp_path / "taken")},
+              "mocap": {"port": 0}, "robot": {"port": 0}, "goals": {"command_port": 0}}
+    (tmp_path / "runtime.yaml").write_text(json.dumps(config))
+    err = one_line_error(capsys, ["run", str(tmp_path / "runtime.yaml")])
+    assert f"log.directory {tmp_path / 'taken'}: cannot create a tick log there" in err

@@ -39,13 +39,11 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _is_locomotion_policy(path: Path) -> bool:
-    import onnx
-
     from dynpush.runtime.locomotion import LOCOMOTION_CONTRACT_KEY
 
-    from .export import read_metadata
+    from .export import load_onnx, read_metadata
 
-    return path.exists() and LOCOMOTION_CONTRACT_KEY in read_metadata(onnx.load(str(path), load_external_data=False))
+    return path.exists() and LOCOMOTION_CONTRACT_KEY in read_metadata(load_onnx(path))
 
 
 def _eval_locomotion(args: argparse.Namespace) -> int:
@@ -119,12 +117,13 @@ def _play(args: argparse.Namespace) -> int:
 
 def _curve(args: argparse.Namespace) -> int:
     from .evaluate import paper_table_i_row
+    from .export import read_json
     from .progress import SMOOTHING, plot_learning_curve
 
     run = Path(args.run)
     out = Path(args.out) if args.out else run / "learning_curve.png"
     config = run / "config.json"
-    data = json.loads(config.read_text()) if config.exists() else {}
+    data = read_json(config) if config.exists() else {}
     paper = paper_table_i_row(data)[1] if data and data.get("task") != "locomotion" else None
     summary = plot_learning_curve(run, out, paper)
     rates = ", ".join(f"{key[:-len('_percent')]} {value:.1f} %" for key, value in summary.items() if key.endswith("_percent"))

@@ -15,6 +15,8 @@ import torch
 from rsl_rl.utils.logger import Logger
 from tqdm import tqdm
 
+from dynpush.errors import CorruptFileError, MissingFileError
+
 EVALUATIONS = "evaluations.jsonl"  # a run folder's evaluations during training
 BREAK_FACTOR = 5.0  # learning curve: a gap this many times an iteration's own time is a pause between sittings
 SMOOTHING = 25  # learning curve: iterations averaged per point
@@ -101,7 +103,7 @@ def read_progress(run_dir: Path) -> list[dict]:
     """The records of ``progress.jsonl``, one per iteration (a re-run iteration after a resume keeps its last)."""
     path = Path(run_dir) / "progress.jsonl"
     if not path.exists():
-        raise FileNotFoundError(f"{path} not found: not a training run folder (dynpush train writes it)")
+        raise MissingFileError(f"{path} not found: not a training run folder (dynpush train writes it)")
     return read_iteration_records(path)
 
 
@@ -118,9 +120,9 @@ def read_iteration_records(path: Path) -> list[dict]:
     for number, line in enumerate(path.read_text().splitlines(), 1):
         try:
             record = json.loads(line)
-        except json.JSONDecodeError as error:
-            raise ValueError(f"{path}:{number}: not a JSON line ({error})") from error
-        records[record["iteration"]] = record
+            records[record["iteration"]] = record
+        except (json.JSONDecodeError, TypeError, KeyError) as error:
+            raise CorruptFileError(f"{path}:{number}: not a JSON record with an iteration ({error!r})") from error
     return [records[it] for it in sorted(records)]
 
 

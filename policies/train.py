@@ -280,8 +280,21 @@ def apply_overrides(cfg: T, overrides: list[str]) -> T:
             value = tuple(value)
         if ("None" if value is None else type(value).__name__) not in allowed:
             raise ConfigError(f"{path} must be {expected}, got {text!r}")
+        if isinstance(current, tuple) and current:
+            value = tuple_like(path, current, value, text)
         setattr(target, leaf, value)
     return cfg
+
+
+def tuple_like(path: str, current: tuple, value: tuple, text: str) -> tuple:
+    """``value`` with the element type of the default ``current`` (ints become floats in a tuple of floats); a
+    ConfigError naming ``path`` when an element has another type."""
+    kind = type(current[0])
+    if kind is float:
+        value = tuple(float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in value)
+    if not all(type(v) is kind for v in value):
+        raise ConfigError(f"{path} must be a tuple of {kind.__name__}, got {text!r}")
+    return value
 
 
 def scripted_expert(object_size: float | None, overrides: tuple[str, ...], name: str) -> ScriptedPusherConfig:

@@ -89,3 +89,19 @@ def test_run_with_an_unwritable_log_directory(tmp_path, capsys):
     (tmp_path / "runtime.yaml").write_text(json.dumps(config))
     err = one_line_error(capsys, ["run", str(tmp_path / "runtime.yaml")])
     assert f"log.directory {tmp_path / 'taken'}: cannot create a tick log there" in err
+
+
+def test_curve_of_a_missing_or_corrupt_run(run, tmp_path, capsys):
+    assert "progress.jsonl not found: not a training run folder" in one_line_error(capsys, ["curve", str(tmp_path / "none")])
+    (run / "progress.jsonl").write_text('{"iteration": 0, "time": 1.0}\n{"iteration": 1, "ti')
+    assert f"{run / 'progress.jsonl'}:2: not a JSON record" in one_line_error(capsys, ["curve", str(run)])
+    (run / "progress.jsonl").write_text('{"time": 1.0}\n')
+    assert f"{run / 'progress.jsonl'}:1: not a JSON record with an iteration" in one_line_error(capsys, ["curve", str(run)])
+    (run / "config.json").write_text("[1, 2")
+    assert f"{run / 'config.json'} is not readable JSON" in one_line_error(capsys, ["curve", str(run)])
+
+
+def test_eval_of_a_corrupt_policy(tmp_path, capsys):
+    policy = tmp_path / "policy.onnx"
+    policy.write_bytes(b"\x08\x07garbage" * 8)
+    assert f"{policy} is not an ONNX model" in one_line_error(capsys, ["eval", str(policy)])

@@ -32,6 +32,16 @@ def test_overrides_are_typed_and_checked():
         TrainConfig.preset_config("laptop")
 
 
+def test_tuple_overrides_keep_their_element_type():
+    cfg = apply_overrides(TrainConfig.preset_config("cpu"), ["env.constraints.leg_nominal_torque=(80, 80, 80.5)"])
+    assert cfg.env.constraints.leg_nominal_torque == (80.0, 80.0, 80.5)
+    assert all(type(t) is float for t in cfg.env.constraints.leg_nominal_torque)
+    for bad in ("network.actor_hidden=(32.5, 'x')", "network.actor_hidden=(64, True)",
+                "env.constraints.leg_nominal_torque=(80, 'x', 80)"):
+        with pytest.raises(ConfigError, match="must be a tuple of"):
+            apply_overrides(TrainConfig.preset_config("cpu"), [bad])
+
+
 def interrupt_update_call(monkeypatch, call: int) -> None:
     """Makes the ``call``-th PPO update raise KeyboardInterrupt (as Ctrl-C during an update would)."""
     from dynpush.policies.cat_ppo import CaTPPO
@@ -126,7 +136,7 @@ def test_learning_curve_counts_pauses_between_sittings_as_the_iteration_only(tmp
     assert main(["curve", str(run), "--out", str(tmp_path / "curve.png")]) == 0
     assert (tmp_path / "curve.png").read_bytes()[:4] == b"\x89PNG"
     (run / "progress.jsonl").write_text("{not json\n")
-    with pytest.raises(ValueError, match="progress.jsonl:1: not a JSON line"):
+    with pytest.raises(ValueError, match="progress.jsonl:1: not a JSON record"):
         read_progress(run)
 
 

@@ -77,8 +77,8 @@ simplified stand-ins:
 
   Each link has an explicit ``MassAPI`` (mass, centre of mass at the link's middle,
   diagonal inertia of a solid cylinder of the link's length and collider radius) **plus
-  0.1 kg m^2 on every diagonal entry**: NEWTON_NOTES measured that XPBD ignores joint
-  armature and the arm sagged; the extra inertia is the armature stand-in.
+  0.1 kg m^2 on every diagonal entry**: XPBD ignores joint armature, and without it the arm
+  sagged (measured, docs/simulator.md); the extra inertia is the armature stand-in.
 
   Limits (deg): SH_ROT [-170, 170], SH_FLE [-95, 95], EL_FLE [-15, 165],
   FA_ROT [-170, 170], WRIST_1 [-115, 115], WRIST_2 [-170, 170].

@@ -247,7 +247,7 @@ class TerminationConfig:
 
 @dataclass
 class SimConfig:
-    """Physics settings, chosen by measurement (NEWTON_NOTES.md, benchmarks/env_throughput.py)."""
+    """Physics settings, chosen by measurement (docs/simulator.md, benchmarks/env_throughput.py)."""
 
     solver: str = "xpbd"
     substeps: int = 4  # per 20 ms control step

@@ -50,7 +50,7 @@ def locomotion(num_envs: int, steps: int) -> dict:
 
 def legged_push(num_envs: int, steps: int, locomotion_policy: str | None) -> dict:
     from dynpush.sim.config import LeggedModeConfig, PushEnvConfig
-    from dynpush.sim.push_env import make_push_env
+    from dynpush.sim.envs import make_push_env
 
     tracked = _rate(make_push_env(PushEnvConfig(num_envs=num_envs)), 11, steps)
     legged_cfg = LeggedModeConfig(enabled=True, locomotion_policy=locomotion_policy or "")

@@ -35,7 +35,8 @@ def _env_info(args: argparse.Namespace) -> int:
 
 def _train(args: argparse.Namespace) -> int:
     from dynpush.policies.locomotion_train import LocomotionTrainConfig
-    from dynpush.policies.train import TrainConfig, apply_overrides, launch_processes, run_config, train
+    from dynpush.policies.train import TrainConfig
+    from dynpush.policies.training import apply_overrides, launch_processes, run_config, train
     from dynpush.sim.config import ConfigError
 
     started = args.launched_at or time.time()  # --hours counts from the user's launch
@@ -68,7 +69,8 @@ def _train(args: argparse.Namespace) -> int:
 
 def _imitate(args: argparse.Namespace) -> int:
     from dynpush.policies.imitation import ImitationConfig, imitate
-    from dynpush.policies.train import TrainConfig, apply_overrides
+    from dynpush.policies.train import TrainConfig
+    from dynpush.policies.training import apply_overrides
 
     argv = args.argv[args.argv.index("imitate") + 1 :]
     cfg = apply_overrides(TrainConfig.preset_config(args.preset), args.set or [])

@@ -4,12 +4,14 @@ Columns, in order (62): base command limits (6), arm command limits (5), arm act
 arm joint position (5), arm joint velocity (5), arm joint torque (5), leg joint torque (12),
 undesired collisions (18), object balance (1).
 
-Tracked-base deviation (README): the leg joint torques are not simulated; they are the quasi-static
+Tracked-base deviation (docs/task.md, "Deviations from the paper"): the leg joint torques are not simulated; they are the quasi-static
 torques ``tau_leg = M @ wrench_b`` that the four legs of the nominal stance need to produce the
 applied base-tracking wrench (``M`` from ``dynpush.sim.leg_statics``).
 """
 
 import warp as wp
+
+from dynpush.runtime.locomotion_layout import NUM_LEG_JOINTS
 
 from .frames import tilt_angle
 from .views import NUM_ARM_JOINTS, NUM_BASE_COMMANDS, NUM_COLLISIONS, PushTask, RobotView
@@ -28,7 +30,6 @@ CONSTRAINT_GROUPS = (
     ("object_balance", 1),
 )
 NUM_CONSTRAINTS = sum(size for _, size in CONSTRAINT_GROUPS)
-NUM_LEG_JOINTS = 12
 
 
 @wp.struct

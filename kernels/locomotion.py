@@ -7,7 +7,7 @@ leg joint position offsets: ``q_leg^target = q_leg^default + action_scale * a``;
 (stiffness ``k_p``, damping ``k_d``, effort limit from ``robot_legged.usda``) produce
 ``tau = clip(k_p (q^target - q) - k_d qd, -effort, effort)``.
 
-Actor observation (61), the layout of the runtime's locomotion ONNX (``dynpush.runtime.config.LOCOMOTION_TERMS``,
+Actor observation (61), the layout of the runtime's locomotion ONNX (``dynpush.runtime.locomotion_layout.LOCOMOTION_TERMS``,
 in that order, scale 1): ``base_linear_velocity_b`` (3), ``base_angular_velocity_b`` (3),
 ``projected_gravity_b`` (3, ``R_b^T (0, 0, -1)``), ``base_command`` (6), ``leg_joint_position`` (12,
 ``q - q_default``), ``leg_joint_velocity`` (12), ``last_leg_actions`` (12), ``arm_joint_position`` (5,
@@ -38,7 +38,8 @@ HFE, KFE per leg (``dynpush.assets_usd.LEG_JOINT_NAMES``).
 
 import warp as wp
 
-from dynpush.runtime.config import LOCOMOTION_TERMS
+from dynpush.runtime.locomotion_layout import LOCOMOTION_TERMS, NUM_LEG_JOINTS
+from dynpush.runtime.observation import NUM_ARM_JOINTS
 
 from .actions import clipped_action
 from .frames import fork_rng, heading_roll_pitch, heading_yaw, next_rng, yaw_quat
@@ -46,10 +47,8 @@ from .observations import add_noise, write_vec
 
 wp.set_module_options({"enable_backward": False})
 
-NUM_LEG_JOINTS = 12
 NUM_FEET = 4
 NUM_COMMANDS = 6
-NUM_ARM_JOINTS = 5  # the 6th arm joint is frozen, as in the push task
 POLICY_TERMS = tuple(LOCOMOTION_TERMS.items())
 PRIVILEGED_TERMS = (("base_height", 1), ("foot_contact", NUM_FEET), ("base_mass_offset", 1))
 NUM_POLICY_OBS = sum(size for _, size in POLICY_TERMS)

@@ -6,9 +6,11 @@ Every array indexed by ``w`` has one entry per world (environment). Frames: ``_w
 
 import warp as wp
 
+# 5 arm joints act, the 6th DynaArm joint is frozen (paper III); the kernels import the count from here.
+from dynpush.runtime.observation import NUM_ARM_JOINTS  # noqa: F401
+
 NUM_ACTIONS = 11  # (vx, vy, yaw rate, roll, pitch, height) + 5 arm joints, paper III-C
 NUM_BASE_COMMANDS = 6
-NUM_ARM_JOINTS = 5  # the 6th DynaArm joint is frozen (paper III)
 NUM_POLICY_OBS = 54  # paper Table "Observations"
 NUM_CRITIC_OBS = 73
 NUM_COLLISIONS = 18

@@ -40,8 +40,7 @@ def _export(args: argparse.Namespace) -> int:
 
 def _is_locomotion_policy(path: Path) -> bool:
     from dynpush.runtime.locomotion import LOCOMOTION_CONTRACT_KEY
-
-    from .export import load_onnx, read_metadata
+    from dynpush.sim.onnx_session import load_onnx, read_metadata
 
     return path.exists() and LOCOMOTION_CONTRACT_KEY in read_metadata(load_onnx(path))
 

@@ -63,7 +63,8 @@ from dynpush.runtime.frames import rotation_angle
 from dynpush.runtime.observation import NUM_ARM_JOINTS, quat_to_matrix
 from dynpush.sim.config import ConfigError, LeggedModeConfig, PushEnvConfig
 from dynpush.sim.episode import SHAPES
-from dynpush.sim.push_env import PushEnv, make_push_env
+from dynpush.sim.envs import make_push_env
+from dynpush.sim.push_env import PushEnv
 
 from .export import OnnxPolicy
 
@@ -116,7 +117,8 @@ def env_config_for(policy: OnnxPolicy, num_envs: int, noise: bool | None = None,
     Legged mode needs ``env.legged.locomotion_policy`` unless ``legs_from_outside`` (sim-to-sim: the runtime
     runs the locomotion policy and sends the leg targets).
     """
-    from .train import TrainConfig, apply_overrides
+    from .train import TrainConfig
+    from .training import apply_overrides
 
     cfg = TrainConfig.from_dict(policy.contract.training_config)
     if not cfg.env.legged.enabled:  # trained on the tracked base: legged mode, if asked for, has today's settings
@@ -341,7 +343,7 @@ class ContactMotionObserver:
     A sample needs the world's episode to have gone on through the two previous steps (three poses of one
     episode). Only the first ``count`` worlds are recorded. On the legged robot the gait shakes the arm, and
     the object takes the shocks; and a base that stalls against the object falls short of its command: these
-    figures show both (README, legged mode)."""
+    figures show both (docs/legged.md)."""
 
     SAMPLES = ("ee_vertical_speed", "object_acceleration", "base_commanded_vx", "base_forward_speed", "object_sliding_force")
     SLIDING_FORCE_BINS = (0.0, 30.0, 60.0, 90.0, np.inf)  # [N] of mu m g: the task's objects need 4-123 N

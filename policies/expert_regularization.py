@@ -1,7 +1,7 @@
 """Expert-regularised CaT-PPO: an imitation term of the scripted pusher inside PPO's loss (ours, not in the paper).
 
-CaT-PPO fine-tuning of a ``dynpush imitate`` actor lost the pushing every time (README, "Expert-guided
-initialisation"), and a behaviour-cloning pass with its own optimizer step did not hold the actor either. Here
+CaT-PPO fine-tuning of a ``dynpush imitate`` actor lost the pushing every time (docs/training_on_cpu.md,
+"Expert-guided initialisation"; docs/experiments/expert_guided_initialisation.md), and a behaviour-cloning pass with its own optimizer step did not hold the actor either. Here
 the expert's action for every stored transition is regressed in the same loss, the same mini-batch and the same
 Adam step as PPO's (as DAPG, Rajeswaran et al. 2018, adds demonstrations to the policy gradient)::
 

@@ -16,7 +16,6 @@ export module (``MLPModel.as_onnx``: normaliser, MLP, deterministic output), tra
 
 from __future__ import annotations
 
-import copy
 import hashlib
 import json
 import logging
@@ -32,6 +31,13 @@ from dynpush.errors import CorruptFileError, MissingFileError
 from dynpush.runtime.contract import INPUT_NAME, OUTPUT_NAME, ContractError, PolicyContract
 from dynpush.runtime.observation import NUM_ACTIONS, NUM_ARM_JOINTS, POLICY_OBSERVATION_SIZE
 from dynpush.sim.config import ConfigError
+from dynpush.sim.onnx_session import (  # noqa: F401  (load_onnx, read_metadata: also read from here)
+    batched_session,
+    check_io,
+    load_onnx,
+    read_metadata,
+    single_thread_options,
+)
 
 if TYPE_CHECKING:  # torch and rsl_rl are imported where needed: loading and running a policy needs neither
     from rsl_rl.models import MLPModel
@@ -40,7 +46,6 @@ if TYPE_CHECKING:  # torch and rsl_rl are imported where needed: loading and run
     from dynpush.policies.train import TrainConfig
 
 OPSET = 18  # as rsl_rl's OnPolicyRunner.export_policy_to_onnx
-BATCH_DIM = "batch"  # symbolic batch dimension of a relaxed in-memory copy (OnnxPolicy(batched=True))
 
 
 def config_sha256(config: dict) -> str:
@@ -239,56 +244,6 @@ def write_onnx(actor: MLPModel, out: Path, metadata: dict[str, str], doc_string:
     onnx.checker.check_model(model)
     onnx.save(model, str(out))  # one self-contained file: the weights are inlined again
     out.with_name(out.name + ".data").unlink(missing_ok=True)  # the exporter's external weights, now stale
-
-
-def load_onnx(path: Path) -> onnx.ModelProto:
-    """The ONNX model in ``path``; a MissingFileError or CorruptFileError naming the file otherwise."""
-    if not Path(path).is_file():
-        raise MissingFileError(f"ONNX file {path} not found")
-    try:
-        return onnx.load(str(path))
-    except Exception as error:  # protobuf's DecodeError, or onnx's own errors, for a file that is no model
-        raise CorruptFileError(f"{path} is not an ONNX model: {' '.join(str(error).split())}") from error
-
-
-def read_metadata(model: onnx.ModelProto) -> dict[str, str]:
-    """The ``metadata_props`` of an ONNX model as a dict."""
-    return {prop.key: prop.value for prop in model.metadata_props}
-
-
-def check_io(model: onnx.ModelProto, input_name: str, input_size: int, output_name: str, output_size: int,
-             what: str) -> None:
-    """Raises :class:`ContractError` unless ``model`` maps ``input_name`` [batch, input_size] to ``output_name``
-    [batch, output_size]."""
-    inputs = {v.name: v for v in model.graph.input}
-    outputs = {v.name: v for v in model.graph.output}
-    if input_name not in inputs or output_name not in outputs:
-        raise ContractError(f"{what}: graph must have input {input_name!r} and output {output_name!r},"
-                            f" has {sorted(inputs)} -> {sorted(outputs)}")
-    for value, size in ((inputs[input_name], input_size), (outputs[output_name], output_size)):
-        dims = [d.dim_value if d.HasField("dim_value") else d.dim_param for d in value.type.tensor_type.shape.dim]
-        if len(dims) != 2 or dims[1] != size:
-            raise ContractError(f"{what}: {value.name!r} has shape {dims}, expected [batch, {size}]")
-
-
-def single_thread_options() -> onnxruntime.SessionOptions:
-    options = onnxruntime.SessionOptions()
-    options.intra_op_num_threads = 1
-    options.inter_op_num_threads = 1
-    return options
-
-
-def batched_session(model: onnx.ModelProto, input_name: str, input_size: int, output_name: str,
-                    output_size: int, what: str) -> onnxruntime.InferenceSession:
-    """An onnxruntime session of ``model`` (checked with :func:`check_io`) whose batch dimension is relaxed to a
-    symbolic one in an in-memory copy (same graph and weights), so that all worlds run in one call."""
-    check_io(model, input_name, input_size, output_name, output_size, what)
-    model = copy.deepcopy(model)
-    for value in (*model.graph.input, *model.graph.output):
-        if value.name in (input_name, output_name):
-            value.type.tensor_type.shape.dim[0].dim_param = BATCH_DIM
-    del model.graph.value_info[:]  # shape hints of intermediates carry the fixed batch size
-    return onnxruntime.InferenceSession(model.SerializeToString(), single_thread_options(), providers=["CPUExecutionProvider"])
 
 
 class OnnxPolicy:

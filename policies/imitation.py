@@ -40,7 +40,8 @@ from .checkpoint_file import read_checkpoint
 from .export import load_run_config, read_json
 from .scripted import ScriptedPusher, ScriptedPusherConfig, check_object_size
 from .run_folder import IMITATION_CHECKPOINT, record_launch
-from .train import TrainConfig, scripted_expert, sigterm_as_keyboard_interrupt
+from .train import TrainConfig, scripted_expert
+from .training import sigterm_as_keyboard_interrupt
 
 
 @dataclass
@@ -194,7 +195,7 @@ def imitate(cfg: TrainConfig, imitation: ImitationConfig, run_dir: Path, resume:
                 tqdm.write(json.dumps(figures))
                 with open(log_path, "a") as f:
                     f.write(json.dumps(figures) + "\n")
-                torch.save(runner._training_state(next_iteration=0), checkpoint)
+                torch.save(runner.training_state(next_iteration=0), checkpoint)
                 torch.save({"dagger": dagger.state_dict(), "rounds_done": round_index + 1}, data_path)
     except KeyboardInterrupt:
         print(f"\ninterrupted: {checkpoint} holds the last finished round; continue with --resume")

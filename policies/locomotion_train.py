@@ -3,11 +3,12 @@
 Same learner as the push task (rsl_rl PPO + our CaT subclass, ``policies/runner.py``); only the environment,
 the network sizes and the ``p_max`` curricula differ.
 
-The defaults are the recipe that walks on this robot (README "Legged fidelity", runs loco8 and loco11): the gait
-forms without disturbances and without constraint terminations, then the random arm motions and base pushes grow
-in (``disturbance_ramp``). The constraints are computed and logged, but their ``p_max`` is 0: every run with CaT's
-(Chane-Sane et al., IROS 2024: collisions hard with p_max 1, the others soft with p_max 0.05 -> 0.25)
-learned to stand, from scratch (loco4, loco5, loco13) and from a walking policy (loco9, loco12).
+The defaults are the recipe that walks on this robot (docs/legged.md; the runs in
+docs/experiments/legged_fidelity.md, "A walking gait under the disturbances"): the gait forms without disturbances
+and without constraint terminations, then the random arm motions and base pushes grow in (``disturbance_ramp``).
+The constraints are computed and logged, but their ``p_max`` is 0: every run with CaT's (Chane-Sane et al.,
+IROS 2024: collisions hard with p_max 1, the others soft with p_max 0.05 -> 0.25) learned to stand, three from
+scratch and two from a walking policy.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from dynpush.sim.config import ConfigError
 from dynpush.sim.locomotion_config import LocomotionEnvConfig
 
 from .schedules import DisturbanceRampConfig
-from .train import PRESETS, NetworkConfig, PPOConfig, _from_dict, rsl_rl_runner_cfg
+from .training import PRESETS, NetworkConfig, PPOConfig, config_from_dict, rsl_rl_runner_cfg
 
 
 def _no_terminations() -> dict[str, tuple[float, float]]:
@@ -42,8 +43,8 @@ class LocomotionTrainConfig:
     p_max: dict[str, tuple[float, float]] = field(default_factory=_no_terminations)  # see the module docstring
     p_max_ramp_fraction: float = 0.5  # of the run over which p_max goes from initial to final
     # Iterations (start, end) over which the random arm motions and base pushes grow from none to their full
-    # size (ours, schedules.DisturbanceRampConfig): loco8 walked at ~200 iterations without them; loco11 kept
-    # walking while they grew over 150 iterations.
+    # size (ours, schedules.DisturbanceRampConfig): a run walked at ~200 iterations without them, and kept walking
+    # while they grew over 150 iterations.
     disturbance_ramp: tuple[int, int] = (250, 400)
 
     @staticmethod
@@ -96,7 +97,7 @@ class LocomotionTrainConfig:
             if "ee_force_max" not in randomization:  # runs from before the end-effector forces had none
                 randomization = {**randomization, "ee_force_max": 0.0}
             data["env"] = {**data["env"], "randomization": randomization}
-        return _from_dict(LocomotionTrainConfig, data)
+        return config_from_dict(LocomotionTrainConfig, data)
 
     def make_env(self, env: LocomotionEnvConfig):
         from dynpush.sim.locomotion_env import LocomotionEnv

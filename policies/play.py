@@ -19,7 +19,8 @@ import numpy as np
 import torch
 
 from dynpush.sim.episode import SHAPES
-from dynpush.sim.push_env import PushEnv, make_push_env
+from dynpush.sim.envs import make_push_env
+from dynpush.sim.push_env import PushEnv
 
 from .evaluate import EnvProbe, env_config_for, run_first_episodes, yaw_of
 from .export import OnnxPolicy

@@ -129,7 +129,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             iteration_start = time.time()
             if self.curriculum.enabled:
                 self.apply_curriculum(fresh_run=it == 0)
-            self._snapshot = {"iteration": it, **copy.deepcopy(self._training_state(next_iteration=it))}
+            self._snapshot = {"iteration": it, **copy.deepcopy(self.training_state(next_iteration=it))}
             if evaluating:  # after the snapshot: an interrupted evaluation loses no iteration
                 seconds = self.evaluate(it)
                 iteration_start += seconds
@@ -204,7 +204,9 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self.env.set_goal_difficulty(difficulty)
         self.logger.run_state["/curriculum/goal_difficulty"] = difficulty
 
-    def _training_state(self, next_iteration: int) -> dict:
+    def training_state(self, next_iteration: int) -> dict:
+        """What a checkpoint holds: the algorithm's state, the iteration a resumed run starts at, the environment's
+        state and torch's random state."""
         saved = self.alg.save()
         saved["iter"] = next_iteration
         saved["infos"] = {"env_state": self.env.state_dict(), "torch_rng": torch.get_rng_state()}
@@ -212,7 +214,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
 
     def save(self, path: str, infos: dict | None = None) -> None:
         """Save models, optimiser, CaT state, environment state and RNG; ``iter`` is the next iteration to run."""
-        saved = self._training_state(next_iteration=self.current_learning_iteration + 1)
+        saved = self.training_state(next_iteration=self.current_learning_iteration + 1)
         saved["infos"].update(infos or {})
         save_checkpoint(saved, Path(path), self.keep_checkpoints)
         self.logger.save_model(path, self.current_learning_iteration)

@@ -66,7 +66,7 @@ from tqdm import tqdm
 
 from dynpush.sim.config import ConfigError
 from dynpush.sim.episode import SHAPES, EpisodeSpec
-from dynpush.sim.push_env import make_push_env
+from dynpush.sim.envs import make_push_env
 
 from .evaluate import EE_CONTACT_COLUMN, EnvProbe, env_config_for
 from .export import OnnxPolicy

@@ -64,7 +64,8 @@ class ReachWeightConfig:
 class DisturbanceRampConfig:
     """Linear ramp of the locomotion task's random arm motions and base pushes (ours): none before
     ``start_iteration``, their full size from ``end_iteration`` on. With them from the start, PPO learned to
-    stand instead of walking (runs loco4-loco7); without them it walked within 230 iterations (loco8)."""
+    stand instead of walking (four runs); without them it walked within 230 iterations
+    (docs/experiments/legged_fidelity.md)."""
 
     start_iteration: int = 0
     end_iteration: int = 0

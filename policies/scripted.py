@@ -37,7 +37,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from dynpush.runtime.frames import tilt_angle
-from dynpush.sim.config import ConfigError, _check_positive
+from dynpush.sim.config import ConfigError, check_positive
 
 
 def wrap(angle: np.ndarray) -> np.ndarray:
@@ -98,7 +98,7 @@ class ScriptedPusherConfig:
                 if not np.isfinite(value):
                     raise ConfigError(f"scripted.{name} must be a finite angle [rad], got {value!r}")
             else:
-                _check_positive(f"scripted.{name}", value, allow_zero=True)
+                check_positive(f"scripted.{name}", value, allow_zero=True)
 
 
 def check_object_size(name: str, size: float | None) -> None:

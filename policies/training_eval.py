@@ -54,7 +54,7 @@ class PeriodicEvaluation:
     """Evaluates the actor of a run every ``cfg.eval_interval`` iterations (see the module docstring); rank 0 only."""
 
     def __init__(self, cfg: TrainConfig, run_dir: Path):
-        from dynpush.sim.push_env import make_push_env
+        from dynpush.sim.envs import make_push_env
 
         self.interval = cfg.eval_interval
         self.run_dir = Path(run_dir)

@@ -16,11 +16,12 @@ import threading
 import time
 from collections import Counter
 
-from .config import NUM_LEG_JOINTS, RuntimeConfig
+from .config import RuntimeConfig
 from .controller import Controller
 from .errors import StartupError
 from .goals import GoalManager
 from .locomotion import OnnxLocomotion
+from .locomotion_layout import NUM_LEG_JOINTS
 from .mocap import open_mocap
 from .policy import load_push_policy
 from .robot_link import open_robot_link

@@ -32,6 +32,7 @@ from dynpush.assets_usd import ARM_JOINT_NAMES
 from dynpush.errors import UserError
 
 from .frames import QUATERNION_ORDERS, UNITS, UP_AXES, BodyOffset, FrameConvention
+from .locomotion_layout import LOCOMOTION_TERMS, NUM_LEG_JOINTS
 from .observation import NUM_ARM_JOINTS
 
 MOTIONCAPTURE_SOURCES = ("vicon", "optitrack", "qualisys", "vrpn", "mock")  # motioncapture.connect types
@@ -39,23 +40,10 @@ MOCAP_SOURCES = ("udp", "replay", *MOTIONCAPTURE_SOURCES)
 ROBOT_LINKS = ("udp",)
 LOCOMOTION_MODES = ("onboard", "onnx")
 CLOCKS = ("realtime", "lockstep")
-NUM_LEG_JOINTS = 12
 MAX_TIMEOUT_S = 1.0  # staleness limits: older measurements must stop the robot within a second
 MAX_RAMP_S = 60.0
 MAX_ADVANCE_AFTER_S = 3600.0
 LOOPBACK = "127.0.0.1"
-# Terms a locomotion ONNX observation may be built from, with their sizes (see locomotion.py).
-LOCOMOTION_TERMS: dict[str, int] = {
-    "base_linear_velocity_b": 3,
-    "base_angular_velocity_b": 3,
-    "projected_gravity_b": 3,
-    "base_command": 6,
-    "leg_joint_position": NUM_LEG_JOINTS,
-    "leg_joint_velocity": NUM_LEG_JOINTS,
-    "last_leg_actions": NUM_LEG_JOINTS,
-    "arm_joint_position": NUM_ARM_JOINTS,
-    "arm_joint_velocity": NUM_ARM_JOINTS,
-}
 
 
 class RuntimeConfigError(UserError, ValueError):

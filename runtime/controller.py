@@ -19,11 +19,12 @@ import math
 
 import numpy as np
 
-from .config import NUM_LEG_JOINTS, RuntimeConfig
+from .config import RuntimeConfig
 from .contract import PolicyContract
 from .frames import rotation_angle, tilt_angle, yaw_quat
 from .goals import Goal
 from .locomotion import OnnxLocomotion
+from .locomotion_layout import NUM_LEG_JOINTS
 from .mocap import TrackedPose
 from .observation import NUM_ACTIONS, NUM_ARM_JOINTS, POLICY_OBSERVATION_SIZE, policy_observation
 from .packets import MODE_STOP, MODE_TARGETS, STATE_FIXED_VALUES, RobotCommand

@@ -1,7 +1,7 @@
 """A learned locomotion policy run by the runtime: 6D base command -> 12 leg joint position targets.
 
 Used with ``locomotion.mode: onnx``. The observation is the concatenation of ``scale * term`` for
-the configured terms (``config.LOCOMOTION_TERMS``), all from the robot state (state estimator and
+the configured terms (``locomotion_layout.LOCOMOTION_TERMS``), all from the robot state (state estimator and
 IMU, never mocap, so locomotion keeps standing when mocap is lost):
 
 - ``base_linear_velocity_b`` (3) [m/s], ``base_angular_velocity_b`` (3) [rad/s]: base frame
@@ -25,9 +25,10 @@ import json
 
 import numpy as np
 
-from .config import LOCOMOTION_TERMS, NUM_LEG_JOINTS, LocomotionTerm, OnnxLocomotionConfig
+from .config import LocomotionTerm, OnnxLocomotionConfig
 from .contract import PolicyContract
 from .errors import StartupError
+from .locomotion_layout import LOCOMOTION_TERMS, NUM_LEG_JOINTS
 from .observation import quat_to_matrix
 from .packets import Proprioception
 from .policy import OnnxModel

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import NUM_LEG_JOINTS
+from .locomotion_layout import NUM_LEG_JOINTS
 from .contract import INPUT_NAME, OUTPUT_NAME
 from .observation import NUM_ACTIONS, POLICY_OBSERVATION_SIZE
 from .policy import OnnxModel

@@ -11,7 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
-from .config import NUM_LEG_JOINTS, RobotConfig
+from .config import RobotConfig
+from .locomotion_layout import NUM_LEG_JOINTS
 from .observation import NUM_ARM_JOINTS
 from .packets import PacketError, Proprioception, RobotCommand, decode_state, encode_command
 from .trust import Drops, SenderGuard

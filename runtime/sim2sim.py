@@ -1,7 +1,7 @@
 """``dynpush sim2sim``: the deployment runtime, exactly as on the robot, against the simulator.
 
 This process runs :class:`~dynpush.runtime.app.Runtime` (numpy + onnxruntime only); the simulator
-(``dynpush.sim.sim2sim``: Newton, Warp, torch) runs in a child process and plays the robot and the
+(``dynpush.policies.sim2sim``: Newton, Warp, torch) runs in a child process and plays the robot and the
 mocap system over loopback UDP. The runtime's config is the given one (or the defaults) with the
 parts that wire it to the simulator replaced: mocap source ``udp`` on an ephemeral loopback port with
 bodies ``base`` and ``object`` in the runtime's conventions, the robot link on an ephemeral loopback port
@@ -84,7 +84,7 @@ def runtime_config(options: SimToSimOptions) -> RuntimeConfig:
 
 
 def _simulator_config(options: SimToSimOptions, runtime: Runtime) -> dict:
-    """Fields of ``dynpush.sim.sim2sim.SimToSimConfig``."""
+    """Fields of ``dynpush.policies.sim2sim.SimToSimConfig``."""
     mocap = runtime.cfg.mocap
     return {
         "policy": options.policy, "state_port": runtime.link.endpoint.port, "mocap_port": runtime.mocap.endpoint.port,
@@ -114,7 +114,7 @@ def run_sim2sim(options: SimToSimOptions) -> dict:
     options.validate()
     stop = threading.Event()
     runtime = Runtime(runtime_config(options), stop)
-    command = [sys.executable, "-m", "dynpush.sim.sim2sim", "--config", json.dumps(_simulator_config(options, runtime))]
+    command = [sys.executable, "-m", "dynpush.policies.sim2sim", "--config", json.dumps(_simulator_config(options, runtime))]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, text=True)
     episodes: list[dict] = []
     done: list[dict] = []

@@ -20,7 +20,8 @@ class ConfigError(UserError, ValueError):
     """An invalid configuration value; the message names the field and the allowed values."""
 
 
-def _check_range(name: str, pair: tuple[float, float], lo: float = -math.inf, hi: float = math.inf) -> None:
+def check_range(name: str, pair: tuple[float, float], lo: float = -math.inf, hi: float = math.inf) -> None:
+    """Raise :class:`ConfigError` unless ``pair`` is a finite ``(low, high)`` with ``lo <= low <= high <= hi``."""
     if len(pair) != 2 or not all(math.isfinite(v) for v in pair):
         raise ConfigError(f"{name} must be a finite (low, high) pair, got {pair!r}")
     if pair[0] > pair[1]:
@@ -29,7 +30,8 @@ def _check_range(name: str, pair: tuple[float, float], lo: float = -math.inf, hi
         raise ConfigError(f"{name} must lie within [{lo}, {hi}], got {pair!r}")
 
 
-def _check_positive(name: str, value: float, allow_zero: bool = False) -> None:
+def check_positive(name: str, value: float, allow_zero: bool = False) -> None:
+    """Raise :class:`ConfigError` unless ``value`` is finite and > 0 (>= 0 with ``allow_zero``)."""
     ok = value >= 0.0 if allow_zero else value > 0.0
     if not (math.isfinite(value) and ok):
         raise ConfigError(f"{name} must be a finite number {'>= 0' if allow_zero else '> 0'}, got {value!r}")
@@ -51,10 +53,10 @@ class SamplingConfig:
     reach_target_on_surface: bool = True  # III-B; False = object centroid (Table I ablation)
 
     def validate(self, prefix: str = "sampling") -> None:
-        _check_range(f"{prefix}.robot_radius", self.robot_radius, lo=0.0)
-        _check_range(f"{prefix}.goal_radius", self.goal_radius, lo=0.0)
+        check_range(f"{prefix}.robot_radius", self.robot_radius, lo=0.0)
+        check_range(f"{prefix}.goal_radius", self.goal_radius, lo=0.0)
         for name in ("robot_bearing", "goal_bearing", "object_yaw", "goal_yaw", "base_yaw"):
-            _check_range(f"{prefix}.{name}", getattr(self, name), lo=-math.pi, hi=math.pi)
+            check_range(f"{prefix}.{name}", getattr(self, name), lo=-math.pi, hi=math.pi)
 
 
 @dataclass
@@ -77,18 +79,18 @@ class RandomizationConfig:
     arm_joint_noise: float = 0.2  # ours: arm joints uniform +-0.2 rad around default at reset (III-E)
 
     def validate(self, prefix: str = "randomization") -> None:
-        _check_range(f"{prefix}.friction", self.friction, lo=0.0)
-        _check_range(f"{prefix}.mass", self.mass, lo=1e-3)
+        check_range(f"{prefix}.friction", self.friction, lo=0.0)
+        check_range(f"{prefix}.mass", self.mass, lo=1e-3)
         for name in ("com_fraction_x", "com_fraction_y", "com_fraction_z"):
-            _check_range(f"{prefix}.{name}", getattr(self, name), lo=-1.0, hi=1.0)
+            check_range(f"{prefix}.{name}", getattr(self, name), lo=-1.0, hi=1.0)
         for name in ("size_x", "size_y", "size_z"):
-            _check_range(f"{prefix}.{name}", getattr(self, name), lo=0.05, hi=2.0)
+            check_range(f"{prefix}.{name}", getattr(self, name), lo=0.05, hi=2.0)
         if not 0.0 <= self.cylinder_probability <= 1.0:
             raise ConfigError(f"{prefix}.cylinder_probability must lie in [0, 1], got {self.cylinder_probability!r}")
-        _check_range(f"{prefix}.base_mass_offset", self.base_mass_offset, lo=-20.0, hi=20.0)
-        _check_range(f"{prefix}.push_interval_s", self.push_interval_s, lo=0.02)
-        _check_positive(f"{prefix}.push_velocity", self.push_velocity, allow_zero=True)
-        _check_positive(f"{prefix}.arm_joint_noise", self.arm_joint_noise, allow_zero=True)
+        check_range(f"{prefix}.base_mass_offset", self.base_mass_offset, lo=-20.0, hi=20.0)
+        check_range(f"{prefix}.push_interval_s", self.push_interval_s, lo=0.02)
+        check_positive(f"{prefix}.push_velocity", self.push_velocity, allow_zero=True)
+        check_positive(f"{prefix}.arm_joint_noise", self.arm_joint_noise, allow_zero=True)
 
 
 @dataclass
@@ -112,7 +114,7 @@ class ObservationNoiseConfig:
     def validate(self, prefix: str = "noise") -> None:
         for f in dataclasses.fields(self):
             if f.name != "enabled":
-                _check_positive(f"{prefix}.{f.name}", getattr(self, f.name), allow_zero=True)
+                check_positive(f"{prefix}.{f.name}", getattr(self, f.name), allow_zero=True)
 
 
 @dataclass
@@ -135,8 +137,8 @@ class ActionConfig:
                 raise ConfigError(f"{prefix}.{name} must have 6 entries (vx, vy, yaw rate, roll, pitch, height)")
         if any(s <= 0.0 for s in self.base_scale):
             raise ConfigError(f"{prefix}.base_scale entries must be > 0, got {self.base_scale!r}")
-        _check_positive(f"{prefix}.arm_scale", self.arm_scale)
-        _check_positive(f"{prefix}.clip", self.clip)
+        check_positive(f"{prefix}.arm_scale", self.arm_scale)
+        check_positive(f"{prefix}.clip", self.clip)
 
 
 @dataclass
@@ -163,7 +165,7 @@ class BaseTrackingConfig:
     def validate(self, prefix: str = "base") -> None:
         for name in ("time_constant", "velocity_gain", "yaw_rate_gain", "height_frequency", "damping_ratio",
                      "max_horizontal_force", "max_vertical_force"):
-            _check_positive(f"{prefix}.{name}", getattr(self, name))
+            check_positive(f"{prefix}.{name}", getattr(self, name))
         for name in ("max_torque", "attitude_inertia"):
             value = getattr(self, name)
             if len(value) != 3 or any(t <= 0.0 for t in value):
@@ -190,7 +192,7 @@ class RewardConfig:
 
     def validate(self, prefix: str = "rewards") -> None:
         for f in dataclasses.fields(self):
-            _check_positive(f"{prefix}.{f.name}", getattr(self, f.name), allow_zero=f.name.endswith("weight"))
+            check_positive(f"{prefix}.{f.name}", getattr(self, f.name), allow_zero=f.name.endswith("weight"))
 
 
 @dataclass
@@ -222,9 +224,9 @@ class ConstraintConfig:
             raise ConfigError(f"{prefix}.arm_nominal_torque must be 5 positive numbers, got {self.arm_nominal_torque!r}")
         if len(self.leg_nominal_torque) != 3 or any(t <= 0 for t in self.leg_nominal_torque):
             raise ConfigError(f"{prefix}.leg_nominal_torque must be 3 positive numbers")
-        _check_positive(f"{prefix}.object_tilt_limit_deg", self.object_tilt_limit_deg)
-        _check_positive(f"{prefix}.base_moving_speed", self.base_moving_speed, allow_zero=True)
-        _check_positive(f"{prefix}.contact_distance", self.contact_distance, allow_zero=True)
+        check_positive(f"{prefix}.object_tilt_limit_deg", self.object_tilt_limit_deg)
+        check_positive(f"{prefix}.base_moving_speed", self.base_moving_speed, allow_zero=True)
+        check_positive(f"{prefix}.contact_distance", self.contact_distance, allow_zero=True)
 
 
 @dataclass
@@ -242,7 +244,7 @@ class TerminationConfig:
 
     def validate(self, prefix: str = "terminations") -> None:
         for f in dataclasses.fields(self):
-            _check_positive(f"{prefix}.{f.name}", getattr(self, f.name))
+            check_positive(f"{prefix}.{f.name}", getattr(self, f.name))
 
 
 @dataclass
@@ -300,9 +302,9 @@ class LeggedModeConfig:
     # object lost its ground contacts whenever the legs moved: 29.7 % of 64 episodes "toppled" with no robot near,
     # 0.0 % with 64 / 256 (Dec 2026). Each contact takes 4 constraint rows (pyramidal friction cone).
     # The locomotion task's 5 CG (and line-search) iterations do not converge the object's contacts beside a walking
-    # robot: objects no robot part touched rose and tipped over (bc9 with loco20: 15 of 35 toppled objects in 128
-    # episodes; tests/test_locomotion.py). Same 256 episodes with 5 / 15 (line search 5) / 30 iterations: 27.3 / 16.0 /
-    # 12.1 % toppled, 0.79 / 0.97 / 1.26 s per 1000 world-steps (Dec 2026).
+    # robot: objects no robot part touched rose and tipped over (15 of 35 toppled objects in 128 episodes of a push
+    # policy on the legs; tests/test_locomotion.py). Same 256 episodes with 5 / 15 (line search 5) / 30 iterations:
+    # 27.3 / 16.0 / 12.1 % toppled, 0.79 / 0.97 / 1.26 s per 1000 world-steps (Dec 2026).
     mujoco: MuJoCoConfig = field(default_factory=lambda: MuJoCoConfig(iterations=30, ls_iterations=30, nconmax=64,
                                                                       njmax=256))
 
@@ -354,8 +356,8 @@ def validate_env(cfg):
         raise ConfigError(f"num_envs must be an integer >= 1, got {cfg.num_envs!r}")
     if not (cfg.device == "cpu" or cfg.device.startswith("cuda")):
         raise ConfigError(f"device must be 'cpu' or 'cuda[:N]', got {cfg.device!r}")
-    _check_positive("control_dt", cfg.control_dt)
-    _check_positive("episode_length_s", cfg.episode_length_s)
+    check_positive("control_dt", cfg.control_dt)
+    check_positive("episode_length_s", cfg.episode_length_s)
     if cfg.max_episode_steps < 1:
         raise ConfigError("episode_length_s must be at least one control step")
     for f in dataclasses.fields(cfg):

@@ -11,6 +11,16 @@ import warp as wp
 from tensordict import TensorDict
 
 
+@wp.kernel
+def articulation_reset_mask(
+    reset: wp.array(dtype=int), articulation_world: wp.array(dtype=int), mask: wp.array(dtype=bool)
+):
+    """Per articulation, whether its world is reset (``reset[world] != 0``); articulations of no world stay."""
+    a = wp.tid()
+    w = articulation_world[a]
+    mask[a] = w >= 0 and reset[w] != 0
+
+
 class ConstraintEpisodeStats:
     """Per world, the steps of the running episode in which a column of each constraint group is violated
     (> 0); the share of an ended episode's steps per group is the paper's Table II measure."""

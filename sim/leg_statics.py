@@ -1,4 +1,5 @@
-"""Quasi-static leg torques of the tracked base (a documented deviation, README "Tracked base").
+"""Quasi-static leg torques of the tracked base (a documented deviation: docs/task.md, "Deviations from the
+paper", tracked base and leg torques).
 
 The paper constrains the 12 leg joint torques of ANYmal. The tracked-base model has no leg joints,
 so the environment maps the applied base wrench to the torques that the legs of the nominal stance

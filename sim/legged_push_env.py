@@ -41,7 +41,7 @@ class LocomotionNetwork:
 
         import onnx
 
-        from dynpush.policies.export import batched_session, read_metadata
+        from .onnx_session import batched_session, read_metadata
 
         model = onnx.load(path)
         metadata = read_metadata(model)

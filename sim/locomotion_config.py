@@ -14,7 +14,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from .config import ConfigError, ConstraintConfig, MuJoCoConfig, RandomizationConfig, _check_positive, _check_range, validate_env
+from .config import ConfigError, ConstraintConfig, MuJoCoConfig, RandomizationConfig, check_positive, check_range, validate_env
 
 _PUSH_CONSTRAINTS = ConstraintConfig()
 _PUSH_RANDOMIZATION = RandomizationConfig()
@@ -38,7 +38,7 @@ class CommandConfig:
                 raise ConfigError(f"{prefix}.lower[{i}] must be <= {prefix}.upper[{i}], got {lo} > {hi}")
         if not 0.2 <= self.lower[5] <= self.upper[5] <= 0.8:
             raise ConfigError(f"{prefix} height range must lie within [0.2, 0.8] m, got ({self.lower[5]}, {self.upper[5]})")
-        _check_range(f"{prefix}.resample_interval_s", self.resample_interval_s, lo=0.02)
+        check_range(f"{prefix}.resample_interval_s", self.resample_interval_s, lo=0.02)
         if not 0.0 <= self.standing_probability <= 1.0:
             raise ConfigError(f"{prefix}.standing_probability must lie in [0, 1], got {self.standing_probability!r}")
 
@@ -53,12 +53,12 @@ class LocomotionRandomizationConfig:
     # Random arm motions (paper III: the locomotion policy is trained with them): targets uniform within
     # default +- amplitude [rad] per joint (SH_ROT, SH_FLE, EL_FLE, FA_ROT, WRIST_1), clipped to the joint limits,
     # a new one every interval. Ours: the largest |q - default| of the shipped push policy's arm, 128 worlds x
-    # 8 s, rounded (0.17, 0.61, 0.95, 0.17, 0.49); 0.8 rad on every joint made walking fail (README).
+    # 8 s, rounded (0.17, 0.61, 0.95, 0.17, 0.49); 0.8 rad on every joint made walking fail (docs/experiments/legged_fidelity.md).
     arm_amplitude: tuple[float, ...] = (0.2, 0.6, 0.9, 0.2, 0.5)
     arm_interval_s: tuple[float, float] = (1.0, 3.0)  # ours
     leg_position_noise: float = 0.1  # ours: leg joints uniform within default +- 0.1 rad at reset
     # Force on the end-effector point (ours): a pushed object pushes back, and the paper's locomotion policy never felt
-    # it (its leg-torque violations; our legged base stalls against the object, README). Horizontal, within +- spread
+    # it (its leg-torque violations; our legged base stalls against the object, docs/legged.md). Horizontal, within +- spread
     # of the heading frame's -x (back towards the robot), magnitude uniform in [0, max] for a share `probability` of
     # the draws (else none), a new one every interval. Sliding the task's objects takes mu m g = 4-123 N.
     ee_force_max: float = 120.0  # [N]
@@ -67,18 +67,18 @@ class LocomotionRandomizationConfig:
     ee_force_interval_s: tuple[float, float] = (1.0, 3.0)
 
     def validate(self, prefix: str = "randomization") -> None:
-        _check_range(f"{prefix}.push_interval_s", self.push_interval_s, lo=0.02)
-        _check_positive(f"{prefix}.push_velocity", self.push_velocity, allow_zero=True)
-        _check_range(f"{prefix}.base_mass_offset", self.base_mass_offset, lo=-20.0, hi=20.0)
+        check_range(f"{prefix}.push_interval_s", self.push_interval_s, lo=0.02)
+        check_positive(f"{prefix}.push_velocity", self.push_velocity, allow_zero=True)
+        check_range(f"{prefix}.base_mass_offset", self.base_mass_offset, lo=-20.0, hi=20.0)
         if len(self.arm_amplitude) != 5 or not all(0.0 <= a <= math.pi for a in self.arm_amplitude):
             raise ConfigError(f"{prefix}.arm_amplitude must be 5 amplitudes within [0, pi] rad, got {self.arm_amplitude!r}")
-        _check_range(f"{prefix}.arm_interval_s", self.arm_interval_s, lo=0.02)
-        _check_positive(f"{prefix}.leg_position_noise", self.leg_position_noise, allow_zero=True)
-        _check_positive(f"{prefix}.ee_force_max", self.ee_force_max, allow_zero=True)
+        check_range(f"{prefix}.arm_interval_s", self.arm_interval_s, lo=0.02)
+        check_positive(f"{prefix}.leg_position_noise", self.leg_position_noise, allow_zero=True)
+        check_positive(f"{prefix}.ee_force_max", self.ee_force_max, allow_zero=True)
         for name, high in (("ee_force_probability", 1.0), ("ee_force_spread", math.pi)):
             if not 0.0 <= getattr(self, name) <= high:
                 raise ConfigError(f"{prefix}.{name} must lie in [0, {high:g}], got {getattr(self, name)!r}")
-        _check_range(f"{prefix}.ee_force_interval_s", self.ee_force_interval_s, lo=0.02)
+        check_range(f"{prefix}.ee_force_interval_s", self.ee_force_interval_s, lo=0.02)
 
 
 @dataclass
@@ -96,9 +96,9 @@ class LocomotionRewardConfig:
     sigma_attitude: float = 0.02  # [rad^2] ours: e = 0.1 rad gives 0.61, 0.14 rad gives 0.37
     sigma_height: float = 0.005  # [m^2] ours: e = 0.07 m gives 0.37
     feet_air_time_weight: float = 1.0  # legged_gym: 1.0
-    air_time_target: float = 0.3  # [s] ours (legged_gym: 0.5): the runs that walked (loco4 on)
+    air_time_target: float = 0.3  # [s] ours (legged_gym: 0.5): every run that walked (docs/experiments/legged_fidelity.md)
     moving_command: float = 0.1  # legged_gym: |(vx, vy)| > 0.1; ours adds |yaw rate|
-    # -sum_j (a_t - a_t-1)^2 over the leg actions; legged_gym: 0.01; ours 0.03 (loco18, Dec 2026: the leg action
+    # -sum_j (a_t - a_t-1)^2 over the leg actions; legged_gym: 0.01; ours 0.03 (Dec 2026: the leg action
     # rate exceeds CaT's 40 1/s in 16 % of the steps instead of 91 %, with the same velocity tracking)
     action_rate_weight: float = 0.03
     base_vertical_velocity_weight: float = 0.0  # -w v_z^2; legged_gym lin_vel_z: 2.0; ours off
@@ -106,7 +106,7 @@ class LocomotionRewardConfig:
 
     def validate(self, prefix: str = "rewards") -> None:
         for f in dataclasses.fields(self):
-            _check_positive(f"{prefix}.{f.name}", getattr(self, f.name),
+            check_positive(f"{prefix}.{f.name}", getattr(self, f.name),
                             allow_zero=f.name.endswith("weight") or f.name == "moving_command")
 
     @property
@@ -139,9 +139,9 @@ class LocomotionConstraintConfig:
         if not 0.0 < self.velocity_fraction <= 1.0:
             raise ConfigError(f"{prefix}.velocity_fraction must lie in (0, 1], got {self.velocity_fraction!r}")
         for name in ("acceleration_limit", "action_rate_limit", "air_time_min", "foot_force_limit"):
-            _check_positive(f"{prefix}.{name}", getattr(self, name))
+            check_positive(f"{prefix}.{name}", getattr(self, name))
         for name in ("collision_margin", "contact_margin"):
-            _check_positive(f"{prefix}.{name}", getattr(self, name), allow_zero=True)
+            check_positive(f"{prefix}.{name}", getattr(self, name), allow_zero=True)
 
 
 @dataclass
@@ -162,7 +162,7 @@ class LocomotionNoiseConfig:
     def validate(self, prefix: str = "noise") -> None:
         for f in dataclasses.fields(self):
             if f.name != "enabled":
-                _check_positive(f"{prefix}.{f.name}", getattr(self, f.name), allow_zero=True)
+                check_positive(f"{prefix}.{f.name}", getattr(self, f.name), allow_zero=True)
 
     def half_width(self, term: str) -> float:
         return getattr(self, term, 0.0)
@@ -197,7 +197,7 @@ class LocomotionEnvConfig:
 
     def validate(self) -> LocomotionEnvConfig:
         for name in ("action_scale", "action_clip", "start_height", "base_min_height"):
-            _check_positive(name, getattr(self, name))
+            check_positive(name, getattr(self, name))
         if not isinstance(self.substeps, int) or self.substeps < 1:
             raise ConfigError(f"substeps must be an integer >= 1, got {self.substeps!r}")
         if not 0.0 < self.base_tilt_deg < 180.0:

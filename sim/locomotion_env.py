@@ -1,7 +1,7 @@
 """LocomotionEnv: N legged robots tracking 6D base commands under random arm motions, as an rsl_rl ``VecEnv``.
 
 Physics is MuJoCo-Warp through Newton (``SolverMuJoCo`` with MuJoCo's own contacts): XPBD's joint drives
-are not the PD law and its legged robot sinks (README, "Solver cross-check"). One control step (50 Hz)
+are not the PD law and its legged robot sinks (docs/simulator.md, "Known simulator behaviour": the solver cross-check). One control step (50 Hz)
 is one captured Warp graph: actions -> leg and arm joint targets and the end-effector force's wrench, ``substeps``
 solver steps, feet, rewards, the ground's contact force on each lower leg (Newton's ``SensorContact`` on MuJoCo's
 contact forces of the last substep), constraints, terminations, auto-reset, scheduled events (commands, arm
@@ -19,10 +19,9 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from dynpush.kernels import locomotion as k
-from dynpush.sim.push_env import _articulation_mask
 
 from .config import ConfigError
-from .env_state import ConstraintEpisodeStats, EnvBase
+from .env_state import ConstraintEpisodeStats, EnvBase, articulation_reset_mask
 from .legged_scene import build_legged_scene, legged_view, locomotion_task
 from .locomotion_config import LocomotionEnvConfig
 
@@ -208,7 +207,7 @@ class LocomotionEnv(EnvBase, VecEnv):
         """New episodes in the worlds with ``reset_flags != 0`` (inside the captured step)."""
         model = self.scene.model
         self._launch(k.start_episodes, [self.reset_flags, self.cfg.seed, self.params, self.view, self.task])
-        wp.launch(_articulation_mask, dim=model.articulation_count,
+        wp.launch(articulation_reset_mask, dim=model.articulation_count,
                   inputs=[self.reset_flags, model.articulation_world, self.articulation_mask], device=self.wp_device)
         newton.eval_fk(model, self.state_0.joint_q, self.state_0.joint_qd, self.state_0, mask=self.articulation_mask)
 

@@ -32,7 +32,7 @@ from dynpush.kernels import (
 from dynpush.kernels.views import CONTACT_COLUMNS, NUM_ACTIONS, NUM_ARM_JOINTS, NUM_CRITIC_OBS, NUM_POLICY_OBS, PushTask, RobotView
 
 from .config import ConfigError, PushEnvConfig
-from .env_state import ConstraintEpisodeStats, EnvBase
+from .env_state import ConstraintEpisodeStats, EnvBase, articulation_reset_mask
 from .episode import EpisodeSpec
 from .scene import build_scene
 
@@ -40,22 +40,6 @@ wp.config.enable_backward = False  # no adjoint kernels: a cold kernel compile t
 
 REWARD_TERMS = ("task", "reach", "object_velocity", "action_rate")
 CONSTRAINT_GROUPS = constraints_k.CONSTRAINT_GROUPS
-
-
-@wp.kernel
-def _articulation_mask(reset: wp.array(dtype=int), articulation_world: wp.array(dtype=int), mask: wp.array(dtype=bool)):
-    a = wp.tid()
-    w = articulation_world[a]
-    mask[a] = w >= 0 and reset[w] != 0
-
-
-def make_push_env(cfg: PushEnvConfig) -> PushEnv:
-    """The push environment of ``cfg``: the tracked base, or with ``cfg.legged.enabled`` the legged robot."""
-    if cfg.legged.enabled:
-        from .legged_push_env import LeggedPushEnv
-
-        return LeggedPushEnv(cfg)
-    return PushEnv(cfg)
 
 
 class PushEnv(EnvBase, VecEnv):
@@ -408,7 +392,7 @@ class PushEnv(EnvBase, VecEnv):
             model.body_inv_inertia])
         self._launch(sampling.zero_velocities, [self.reset_flags, self.robot_qd_start, self.scene.robot_qd_count,
                                                 self.object_qd_start, self.state_0.joint_qd])
-        wp.launch(_articulation_mask, dim=model.articulation_count,
+        wp.launch(articulation_reset_mask, dim=model.articulation_count,
                   inputs=[self.reset_flags, model.articulation_world, self.articulation_mask], device=self.wp_device)
         newton.eval_fk(model, self.state_0.joint_q, self.state_0.joint_qd, self.state_0, mask=self.articulation_mask)
         self.solver.notify_model_changed(flags)

@@ -501,4 +501,4 @@ def test_ground_file():
     assert b.shape_count == 1
     assert b.shape_type[0] == newton.GeoType.PLANE and b.shape_body[0] == -1
     assert np.allclose(np.asarray(b.shape_transform[0]), (0, 0, 0, 0, 0, 0, 1), atol=1e-7)  # z-up at z = 0
-    assert b.shape_material_mu[0] == pytest.approx(0.4)  # the floor's own coefficient (README "Friction")
+    assert b.shape_material_mu[0] == pytest.approx(0.4)  # the floor's own coefficient (docs/task.md, "Deviations from the paper": friction)

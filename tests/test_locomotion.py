@@ -25,7 +25,7 @@ from dynpush.sim.config import ConfigError, LeggedModeConfig, MuJoCoConfig, Push
 from dynpush.sim.legged_push_env import LEG_TORQUE_COLUMN
 from dynpush.sim.locomotion_config import LocomotionEnvConfig, LocomotionNoiseConfig
 from dynpush.sim.locomotion_env import LocomotionEnv
-from dynpush.sim.push_env import make_push_env
+from dynpush.sim.envs import make_push_env
 from test_export import observations, torch_actions
 from test_runtime_helpers import write_policy
 

@@ -45,7 +45,7 @@ def test_resting_objects_stay_put_for_20_s(small_env):
     assert all(tilt_deg(q) < 1.0 for q in end[:, 3:])
     centred = [0, 1, 3]  # CoM on the vertical axis through the centroid
     assert (drift[centred] < 0.01).all(), f"resting objects drifted {drift[centred]} m in 20 s"
-    # Known Newton 1.8 XPBD artefact (README): a horizontal CoM offset makes a resting body creep by
+    # Known Newton 1.8 XPBD artefact (docs/simulator.md, "Known simulator behaviour"): a horizontal CoM offset makes a resting body creep by
     # about a millimetre per second (also in a bare Newton scene). It must stay inside the 10 cm
     # success tolerance over a whole episode.
     assert drift[2] < 0.10, f"off-centre CoM creep {drift[2]:.3f} m in 20 s"

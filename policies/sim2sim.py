@@ -1,7 +1,7 @@
 """The simulator side of sim-to-sim: a one-world PushEnv plays the robot and the motion capture system.
 
 ``dynpush sim2sim`` (``dynpush.runtime.sim2sim``) starts this module in its own process,
-``python -m dynpush.sim.sim2sim ...``, and runs the deployment runtime against it over loopback UDP
+``python -m dynpush.policies.sim2sim ...``, and runs the deployment runtime against it over loopback UDP
 with the runtime's own datagrams (``dynpush.runtime.packets``):
 
 - **commands in** (``DPC1``): the onboard locomotion is the tracked base, so the 6D base command and
@@ -48,9 +48,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from dynpush.policies.evaluate import EnvProbe, env_config_for
-from dynpush.policies.play import TrajectoryObserver, concatenate_episodes, episode_row, episode_setup, plot_play
-from dynpush.policies.export import OnnxPolicy
 from dynpush.runtime.contract import PolicyContract
 from dynpush.runtime.frames import quat_multiply
 from dynpush.runtime.observation import NUM_ACTIONS, NUM_ARM_JOINTS, quat_to_matrix
@@ -63,7 +60,11 @@ from dynpush.runtime.sim2sim import EVENT_PREFIX
 from dynpush.runtime.timing import RealClock, Ticker
 from dynpush.runtime.udp import UdpEndpoint
 
-from .push_env import make_push_env
+from dynpush.sim.envs import make_push_env
+
+from .evaluate import EnvProbe, env_config_for
+from .export import OnnxPolicy
+from .play import TrajectoryObserver, concatenate_episodes, episode_row, episode_setup, plot_play
 
 OPERATING_STATES = (State.PUSH, State.HOLD, State.MOCAP_LOST)
 
@@ -277,7 +278,7 @@ def emit(event: dict) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m dynpush.sim.sim2sim", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m dynpush.policies.sim2sim", description=__doc__.split("\n")[0])
     parser.add_argument("--config", required=True, help="SimToSimConfig as JSON")
     cfg = SimToSimConfig(**json.loads(parser.parse_args(argv).config))
     torch.set_num_threads(1)

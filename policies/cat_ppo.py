@@ -122,8 +122,9 @@ class CaTPPO(PPO):
         """Record one environment step with its termination probability.
 
         The stored reward is the environment's times :attr:`reward_scale`; it is then, rsl_rl's time-out bootstrap
-        ``gamma * V`` included, scaled by ``1 - delta``: a terminated transition has no continuation value either. CaT statistics of the step are added to the
-        extras dict that rsl_rl's logger averages over the iteration (``"episode"`` if present, else ``"log"``).
+        ``gamma * V`` included, scaled by ``1 - delta``: a terminated transition has no continuation value either.
+        CaT statistics of the step are added to the extras dict that rsl_rl's logger averages over the iteration
+        (``"episode"`` if present, else ``"log"``).
         """
         constraints = extras["constraints"].to(self.device, torch.float)
         delta = self.termination_probability(constraints)

@@ -213,8 +213,10 @@ def test_a_new_run_starts_from_another_runs_imitation_actor_with_its_own_optimiz
     actor = runner.alg.actor.state_dict()
     assert not torch.allclose(saved["actor_state_dict"]["distribution.std_param"], torch.tensor(0.07))
     torch.testing.assert_close(actor["distribution.std_param"], torch.full((runner.env.num_actions,), 0.07))
-    held = {name: value for name, value in actor.items() if "normalizer" not in name and "std_param" not in name}
-    assert any(name.startswith("mlp.") for name in held)  # the normaliser goes on learning from the rollouts
+    held = {name: value for name, value in actor.items() if "std_param" not in name}
+    assert any(name.startswith("mlp.") for name in held)
+    assert any("normalizer" in name for name in held)  # held too: a run started from another keeps its statistics
+    assert json.loads((tmp_path / "fine" / "config.json").read_text())["network"]["hold_actor_normalizer"] is True
     for name, value in held.items():
         torch.testing.assert_close(value, saved["actor_state_dict"][name], msg=name)
     assert runner.alg.learning_rate == 0.0002 and runner.current_learning_iteration == 1

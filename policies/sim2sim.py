@@ -32,7 +32,10 @@ run, also early when the runtime reports its latched STOPPED state. With ``traje
 base, end-effector and object of every episode are drawn as ``dynpush play`` draws them.
 
 Clock: real time (an absolute-deadline ticker at the control rate), or lock-step (one step per command
-received, for tests).
+received, for tests). In real time the simulator reports its own pace, ``{"event": "clock", "deadline": k,
+"steps": n}`` (at a wait for deadline ``k``, after ``n`` steps) about every ``CLOCK_REPORT_PERIODS`` control
+periods and with ``done`` (``"clock": [k, n]`` of its last wait); the runtime's side judges from them whether it kept
+the control rate (``dynpush.runtime.sim2sim.RateCheck``).
 """
 
 from __future__ import annotations
@@ -67,6 +70,7 @@ from .export import OnnxPolicy
 from .play import TrajectoryObserver, concatenate_episodes, episode_row, episode_setup, plot_play
 
 OPERATING_STATES = (State.PUSH, State.HOLD, State.MOCAP_LOST)
+CLOCK_REPORT_PERIODS = 10  # real time: a clock report every 10 control periods (0.2 s at 50 Hz), 1/5 of a window
 
 
 @dataclass
@@ -145,6 +149,8 @@ class SimRobot:
         self.malformed_commands = 0
         self.step = 0
         self._seq = 0
+        self.clock: tuple[int, int] | None = None  # real time: (deadline index, steps before it) of the last wait
+        self._clock_reported = -CLOCK_REPORT_PERIODS
 
     # ------------------------------------------------------------------ commands -> actions
     def receive_commands(self) -> None:
@@ -214,9 +220,17 @@ class SimRobot:
     # ------------------------------------------------------------------ the run
     def _wait(self, ticker: Ticker | None) -> None:
         if ticker is not None:
-            ticker.wait()
+            self._clock_report(ticker.wait().index)
         elif not self.endpoint.wait_readable(self.cfg.command_timeout_s):
             raise TimeoutError(f"lock-step: no command from the runtime for {self.cfg.command_timeout_s} s")
+
+    def _clock_report(self, deadline: int) -> None:
+        """Real time: records this wait's deadline and the steps taken before it; a ``clock`` event when due. A
+        deadline index that runs ahead of the steps means the ticker skipped deadlines: stepping is too slow."""
+        self.clock = (deadline, self.step)
+        if deadline - self._clock_reported >= CLOCK_REPORT_PERIODS:
+            emit({"event": "clock", "deadline": deadline, "steps": self.step})
+            self._clock_reported = deadline
 
     def _start_episode_record(self) -> tuple[TrajectoryObserver | None, dict]:
         """At an episode's start: its object and goal, and a path recorder when a picture is asked for."""
@@ -266,7 +280,7 @@ class SimRobot:
         if paths:
             plot_play({"policy": self.cfg.policy, "episodes": rows}, concatenate_episodes(paths), Path(self.cfg.trajectory_png))
         emit({"event": "done", "steps": self.step, "episodes": results, "runtime_stopped": results < self.cfg.episodes,
-              "malformed_commands": self.malformed_commands,
+              "malformed_commands": self.malformed_commands, "clock": self.clock,
               "trajectory_png": self.cfg.trajectory_png if paths else None})
 
     def close(self) -> None:

@@ -36,6 +36,7 @@ def test_sim2sim_end_to_end(robot_policy, tmp_path):
                    "--set", "env.episode_length_s=1.0", "--log-dir", str(tmp_path / "logs"), "--out", str(out)])
     report = json.loads(out.read_text())
     assert status == 0 and report["completed"] and report["simulator_exit_code"] == 0
+    assert report["timing"] == "lockstep" and report["realtime_check"] is None
     assert report["episodes"] == 1 and report["success_rate"] in (0.0, 1.0)
     assert report["episode_results"][0]["steps"] == 50, "1 s episode at 50 Hz"
     runtime = report["runtime"]
@@ -90,6 +91,8 @@ def test_sim2sim_real_time(robot_policy, tmp_path):
     report = run_sim2sim(SimToSimOptions(policy=str(robot_policy), episodes=2, overrides=["env.episode_length_s=2.0"],
                                          latency_s=0.02, drop=0.05, log_dir=str(tmp_path)))
     assert report["completed"] and report["episodes"] == 2 and report["conditions"]["clock"] == "realtime"
+    assert report["timing"] == "realtime" and report["realtime_check"]["slowest_window_rate"] >= 0.9
+    assert report["realtime_check"]["periods"] >= 200, "the simulator's clock reports cover the run"
     runtime = report["runtime"]
     assert runtime["states"]["PUSH"] >= 150
     assert runtime["timing"]["lateness"]["p50_ms"] < 5.0

@@ -23,20 +23,13 @@ ARM_JOINT_NAMES: tuple[str, ...] = ("SH_ROT", "SH_FLE", "EL_FLE", "FA_ROT", "WRI
 ARM_LINK_NAMES: tuple[str, ...] = ("shoulder", "upper_arm", "elbow", "forearm", "wrist_1", "wrist_2")
 #: The end-effector's collision sphere on the last arm link; its centre is the end-effector point.
 EE_SHAPE: str = "ee_collision"
-#: Leg collision shapes on the ``base`` body (prim names under ``/Robot/base``).
-LEG_SHAPE_NAMES: tuple[str, ...] = (
-    "LF_thigh",
-    "LF_shank",
-    "RF_thigh",
-    "RF_shank",
-    "LH_thigh",
-    "LH_shank",
-    "RH_thigh",
-    "RH_shank",
-)
+#: The legs, in the order of every per-leg list: left front, right front, left hind, right hind.
+LEG_NAMES: tuple[str, ...] = ("LF", "RF", "LH", "RH")
+#: Leg collision shapes on the ``base`` body (prim names under ``/Robot/base``): LF_thigh, LF_shank, RF_thigh, ...
+LEG_SHAPE_NAMES: tuple[str, ...] = tuple(f"{leg}_{part}" for leg in LEG_NAMES for part in ("thigh", "shank"))
 
-#: Revolute leg joints of ``robot_legged.usda`` (prim names under ``/Robot/joints``), legs LF, RF, LH, RH.
-LEG_JOINT_NAMES: tuple[str, ...] = tuple(f"{leg}_{joint}" for leg in ("LF", "RF", "LH", "RH") for joint in ("HAA", "HFE", "KFE"))
+#: Revolute leg joints of ``robot_legged.usda`` (prim names under ``/Robot/joints``): LF_HAA, LF_HFE, LF_KFE, ...
+LEG_JOINT_NAMES: tuple[str, ...] = tuple(f"{leg}_{joint}" for leg in LEG_NAMES for joint in ("HAA", "HFE", "KFE"))
 
 __all__ = [
     "ARM_JOINT_NAMES",
@@ -46,6 +39,7 @@ __all__ = [
     "EE_SHAPE",
     "GROUND_USD",
     "LEG_JOINT_NAMES",
+    "LEG_NAMES",
     "LEG_SHAPE_NAMES",
     "ROBOT_LEGGED_USD",
     "ROBOT_USD",

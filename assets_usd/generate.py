@@ -153,6 +153,8 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
+from dynpush.assets_usd import ARM_JOINT_NAMES, ARM_LINK_NAMES, LEG_JOINT_NAMES, LEG_NAMES
+
 # ---------------------------------------------------------------------------------------
 # Numbers (SI units; angles in radians unless the name says DEG)
 # ---------------------------------------------------------------------------------------
@@ -169,8 +171,7 @@ NOMINAL_BASE_HEIGHT = 0.50
 BASE_SIZE = (0.60, 0.30, 0.20)
 BASE_MASS = 50.0
 
-# --- legs (order LF, RF, LH, RH) ---
-LEG_NAMES = ("LF", "RF", "LH", "RH")
+# --- legs (order LEG_NAMES: LF, RF, LH, RH) ---
 HIP_X = 0.30
 HIP_Y = 0.10
 THIGH_LATERAL_OFFSET = 0.09
@@ -218,10 +219,8 @@ LEG_NOMINAL_FOOT_POSITIONS = tuple(
     tuple(_r(v) for v in leg_forward_kinematics(t, h, k)[1])
     for t, h, k in zip(LEG_THIGH_START_POSITIONS, LEG_NOMINAL_HFE, LEG_NOMINAL_KFE, strict=True)
 )
-LEG_SHAPE_NAMES = tuple(f"{leg}_{part}" for leg in LEG_NAMES for part in ("thigh", "shank"))
 
 # --- articulated legs (robot_legged.usda only; ANYmal-like stand-ins, see the module docstring) ---
-LEG_JOINT_NAMES = tuple(f"{leg}_{joint}" for leg in LEG_NAMES for joint in ("HAA", "HFE", "KFE"))
 LEG_BODY_NAMES = tuple(f"{leg}_{part}" for leg in LEG_NAMES for part in ("HIP", "THIGH", "SHANK"))
 LEG_FOOT_NAMES = tuple(f"{leg}_foot" for leg in LEG_NAMES)
 LEG_LINK_MASSES = (1.4, 1.6, 0.5)  # hip, thigh, shank [kg]; 3.5 kg per leg
@@ -239,8 +238,6 @@ DEFAULT_LEG_JOINT_POSITIONS = tuple(
 
 # --- arm ---
 ARM_MOUNT = (0.25, 0.0, 0.10)
-ARM_JOINT_NAMES = ("SH_ROT", "SH_FLE", "EL_FLE", "FA_ROT", "WRIST_1", "WRIST_2")
-ARM_LINK_NAMES = ("shoulder", "upper_arm", "elbow", "forearm", "wrist_1", "wrist_2")
 ARM_JOINT_AXES = ("Z", "Y", "Y", "X", "Y", "X")  # in the parent body frame
 # distance from a link's own joint to the next joint, along the arm
 ARM_LINK_LENGTHS = (0.10, 0.40, 0.10, 0.30, 0.10, 0.08)  # wrist_2: to the EE centre

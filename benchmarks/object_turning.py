@@ -156,7 +156,7 @@ def measure(steps: int, overrides: tuple[str, ...] = ()) -> list[dict]:
     contacts at the start and the end-effector-object friction coefficient. ``overrides``: ``PushEnvConfig`` fields
     (``sim.solver=mujoco``), with the training config's parser."""
     from dynpush.kernels.contacts import ROLE_EE
-    from dynpush.policies.evaluate import yaw_of
+    from dynpush.policies.env_probe import yaw_of
     from dynpush.policies.scripted import ScriptedPusher, ScriptedPusherConfig
     from dynpush.policies.train import apply_overrides
     from dynpush.sim.config import ObservationNoiseConfig, PushEnvConfig

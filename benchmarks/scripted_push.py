@@ -43,7 +43,9 @@ class ContactObserver:
 
 
 def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None, overrides: tuple[str, ...] = ()) -> dict:
-    from dynpush.policies.evaluate import ConstraintObserver, GoalErrorObserver, run_first_episodes
+    from dynpush.policies.episodes import run_first_episodes
+    from dynpush.policies.observers import GoalErrorObserver
+    from dynpush.policies.tables import ConstraintObserver
     from dynpush.policies.scripted import ScriptedPusher
     from dynpush.policies.train import scripted_expert
     from dynpush.policies.play import TrajectoryObserver, Trajectories, episode_row, episode_setup, plot_play

@@ -22,8 +22,9 @@ Table I ablations are separate trainings evaluated the same way, e.g.
 
 
 def _export(args: argparse.Namespace) -> int:
-    from .export import OnnxPolicy, export_policy, load_run_config
+    from .export import export_policy, load_run_config
     from .locomotion_train import LocomotionTrainConfig
+    from .onnx_policy import OnnxPolicy
 
     if isinstance(load_run_config(Path(args.run)), LocomotionTrainConfig):
         from .locomotion_export import export_locomotion
@@ -76,7 +77,7 @@ def _eval(args: argparse.Namespace) -> int:
         print(f"wrote {out / 'scenario.json'} and {out / 'scenario.png'}")
         return 0
     if args.footprints:
-        from .evaluate import FootprintConfig, footprint_study
+        from .footprints import FootprintConfig, footprint_study
 
         cfg = FootprintConfig(successful_episodes=args.footprint_episodes, num_envs=args.num_envs or 512,
                               device=args.device, seed=args.seed, overrides=overrides)
@@ -115,9 +116,9 @@ def _play(args: argparse.Namespace) -> int:
 
 
 def _curve(args: argparse.Namespace) -> int:
-    from .evaluate import paper_table_i_row
-    from .export import read_json
     from .progress import SMOOTHING, plot_learning_curve
+    from .run_folder import read_json
+    from .tables import paper_table_i_row
 
     run = Path(args.run)
     out = Path(args.out) if args.out else run / "learning_curve.png"

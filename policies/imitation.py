@@ -37,9 +37,9 @@ from dynpush.errors import MissingFileError
 from dynpush.sim.config import ConfigError
 
 from .checkpoint_file import read_checkpoint
-from .export import load_run_config, read_json
+from .export import load_run_config
 from .scripted import ScriptedPusher, ScriptedPusherConfig, check_object_size
-from .run_folder import IMITATION_CHECKPOINT, record_launch
+from .run_folder import IMITATION_CHECKPOINT, read_json, record_launch
 from .train import TrainConfig, scripted_expert
 from .training import sigterm_as_keyboard_interrupt
 

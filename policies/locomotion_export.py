@@ -20,7 +20,8 @@ from dynpush.kernels.locomotion import NUM_LEG_JOINTS, NUM_POLICY_OBS, POLICY_TE
 from dynpush.runtime.config import LocomotionTerm, OnnxLocomotionConfig
 from dynpush.runtime.locomotion import locomotion_contract
 
-from .export import config_sha256, load_actor, load_run_config, resolve_checkpoint, write_onnx
+from .actor import load_actor
+from .export import config_sha256, load_run_config, resolve_checkpoint, write_onnx
 from .locomotion_train import LocomotionTrainConfig
 
 if TYPE_CHECKING:

@@ -22,8 +22,10 @@ from dynpush.sim.episode import SHAPES
 from dynpush.sim.envs import make_push_env
 from dynpush.sim.push_env import PushEnv
 
-from .evaluate import EnvProbe, env_config_for, run_first_episodes, yaw_of
-from .export import OnnxPolicy
+from .env_probe import EnvProbe, yaw_of
+from .episodes import run_first_episodes
+from .onnx_policy import OnnxPolicy
+from .trained_env import env_config_for
 
 
 def outline(shape: str, dims, center, yaw: float) -> np.ndarray:

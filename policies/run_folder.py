@@ -24,7 +24,7 @@ from pathlib import Path
 
 import torch
 
-from dynpush.errors import MissingFileError
+from dynpush.errors import CorruptFileError, MissingFileError
 from dynpush.sim.config import ConfigError
 
 from .checkpoint_file import CheckpointError
@@ -96,6 +96,20 @@ def save_checkpoint(state: dict, path: Path, keep: int = 0) -> None:
     if keep:
         for old in checkpoints(path.parent)[:-keep]:
             old.unlink()
+
+
+def read_json(path: Path) -> dict:
+    """The JSON object in ``path`` (a run's ``config.json``, ``imitation_config.json``); a MissingFileError or
+    CorruptFileError naming the file otherwise."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise MissingFileError(f"{path} not found") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise CorruptFileError(f"{path} is not readable JSON: {error}") from error
+    if not isinstance(data, dict):
+        raise CorruptFileError(f"{path} holds a JSON {type(data).__name__}, not an object")
+    return data
 
 
 def write_config(run_dir: Path, config: dict) -> None:

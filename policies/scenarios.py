@@ -68,8 +68,9 @@ from dynpush.sim.config import ConfigError
 from dynpush.sim.episode import SHAPES, EpisodeSpec
 from dynpush.sim.envs import make_push_env
 
-from .evaluate import EE_CONTACT_COLUMN, EnvProbe, env_config_for
-from .export import OnnxPolicy
+from .env_probe import EE_CONTACT_COLUMN, EnvProbe
+from .onnx_policy import OnnxPolicy
+from .trained_env import env_config_for
 
 FACE_NAMES = ("+x", "-x", "+y", "-y")  # vertical faces of a cuboid by outward normal (object frame)
 NO_FACE = -1

@@ -39,6 +39,8 @@ import numpy as np
 from dynpush.runtime.frames import tilt_angle
 from dynpush.sim.config import ConfigError, check_positive
 
+from .env_probe import EnvProbe, yaw_of
+
 
 def wrap(angle: np.ndarray) -> np.ndarray:
     """Angles wrapped into [-pi, pi)."""
@@ -111,8 +113,6 @@ class ScriptedPusher:
     """The controller of the module docstring for all worlds of a PushEnv, called once per step like a policy."""
 
     def __init__(self, env, cfg: ScriptedPusherConfig | None = None):
-        from dynpush.policies.evaluate import EnvProbe
-
         self.env, self.cfg, self.probe = env, cfg or ScriptedPusherConfig(), EnvProbe(env)
         self.cfg.validate()
         self.base_default = np.asarray(env.cfg.actions.base_default)
@@ -151,8 +151,6 @@ class ScriptedPusher:
 
     def __call__(self, observations: np.ndarray) -> np.ndarray:
         """Actions of every world from the true state (``observations`` unused: a policy's call signature)."""
-        from dynpush.policies.evaluate import yaw_of
-
         cfg = self.cfg
         base, obj = self.probe.base(), self.probe.object()
         p_base, yaw_base = base[:, :2], yaw_of(base[:, 3:])

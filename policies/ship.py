@@ -20,10 +20,11 @@ from dynpush.errors import MissingFileError
 
 from .checkpoint_file import read_checkpoint
 from .evaluate import EvalConfig, evaluate
-from .export import OnnxPolicy, export_policy, load_run_config, resolve_checkpoint
+from .export import export_policy, load_run_config, resolve_checkpoint
 from .locomotion_eval import LocomotionEvalConfig, evaluate_locomotion
 from .locomotion_export import export_locomotion
 from .locomotion_train import LocomotionTrainConfig
+from .onnx_policy import OnnxPolicy
 from .progress import imitation_summary, plot_learning_curve, training_records, wall_clock_hours
 
 

@@ -22,7 +22,7 @@ with the runtime's own datagrams (``dynpush.runtime.packets``):
   environment ignores); before the first command, or without leg targets, the legs hold their default.
 - **goals out** (``DPG1``): the episode's goal when it starts.
 
-Episodes: the environment the policy was trained in (``policies.evaluate.env_config_for``: the
+Episodes: the environment the policy was trained in (``policies.trained_env.env_config_for``: the
 training config of the policy's metadata, one world, observation noise off, ``env.field=value``
 overrides). The first episode starts when the runtime reports an operating state (its start-up ramp
 is over); an episode ends at the environment's time-out, topple or fall (auto-reset inside the step)
@@ -65,9 +65,10 @@ from dynpush.runtime.udp import UdpEndpoint
 
 from dynpush.sim.envs import make_push_env
 
-from .evaluate import EnvProbe, env_config_for
-from .export import OnnxPolicy
+from .env_probe import EnvProbe
+from .onnx_policy import OnnxPolicy
 from .play import TrajectoryObserver, concatenate_episodes, episode_row, episode_setup, plot_play
+from .trained_env import env_config_for
 
 OPERATING_STATES = (State.PUSH, State.HOLD, State.MOCAP_LOST)
 CLOCK_REPORT_PERIODS = 10  # real time: a clock report every 10 control periods (0.2 s at 50 Hz), 1/5 of a window

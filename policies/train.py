@@ -15,6 +15,7 @@ from dynpush.kernels.constraints import CONSTRAINT_GROUPS
 from dynpush.sim.config import ConfigError, PushEnvConfig
 
 from .curriculum import GoalCurriculumConfig
+from .expert_regularization import ExpertLabelledEnv
 from .schedules import ConstraintCurriculumConfig
 from .scripted import ScriptedPusherConfig, check_object_size
 from .training import (  # noqa: F401  (re-exported: the CLI, tests and benchmarks import them from here)
@@ -130,8 +131,6 @@ class TrainConfig:
     def make_env(self, env: PushEnvConfig):
         """The push environment of ``env`` (tracked base, or the legged robot with ``env.legged.enabled``)."""
         from dynpush.sim.envs import make_push_env
-
-        from .expert_regularization import ExpertLabelledEnv
 
         if max(self.imitation_weight) == 0:
             return make_push_env(env)

@@ -26,8 +26,10 @@ import torch
 from dynpush.errors import MissingFileError
 from dynpush.sim.config import ConfigError, PushEnvConfig
 
-from .run_folder import CONFIG, check_new_run, load_newest_readable, record_launch, write_config
+from .actor import build_actor, load_onnx_actor
+from .run_folder import CONFIG, check_new_run, load_newest_readable, read_json, record_launch, write_config
 from .runner import CaTOnPolicyRunner, TimeBudget
+from .training_eval import PeriodicEvaluation
 
 if TYPE_CHECKING:
     from dynpush.sim.locomotion_config import LocomotionEnvConfig
@@ -245,8 +247,6 @@ def train(cfg: TaskTrainConfig, run_dir: Path, resume: bool = False, command: st
     runner = CaTOnPolicyRunner(env, cfg.runner_cfg(), log_dir=log_dir, device=env.device)
     start_from(runner, cfg, run_dir, resume, init_from, onnx_actor, group)
     if group.rank == 0 and getattr(cfg, "eval_interval", 0):  # the push task's periodic evaluation
-        from .training_eval import PeriodicEvaluation
-
         runner.evaluation = PeriodicEvaluation(cfg, run_dir)
     if group.rank == 0:
         write_config(run_dir, cfg.to_dict())
@@ -277,8 +277,6 @@ def run_config(cfg: T, run_dir: Path, resume: bool, extend_to: int | None) -> T:
     if not resume:
         check_new_run(run_dir)
         return cfg.validate()
-    from .export import read_json
-
     config_path = run_dir / CONFIG
     if not config_path.exists():
         raise MissingFileError(f"--resume: no {config_path}; start the run without --resume first")
@@ -299,8 +297,6 @@ def read_onnx_actor(cfg: TaskTrainConfig, init_from: Path | None) -> torch.nn.Mo
     if not cfg.critic_warmup_iterations:
         raise ConfigError(f"--init-from {init_from}: an ONNX file holds the actor only; set critic_warmup_iterations > 0"
                           " (e.g. 60) so that the new critic learns the returns before the actor is trained")
-    from .export import build_actor, load_onnx_actor
-
     actor = build_actor(cfg)
     load_onnx_actor(actor, init_from)
     return actor

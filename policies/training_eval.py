@@ -3,7 +3,7 @@
 
 The training episodes measure a noisy policy on the run's own task (which a run may narrow, e.g. nearer goals) while
 it changes; this evaluation measures the deterministic mean of the actor on the paper's distribution, one episode per
-world as ``dynpush eval`` does (:func:`~dynpush.policies.evaluate.first_episode_rates`, the same episode loop and
+world as ``dynpush eval`` does (:func:`~dynpush.policies.tables.first_episode_rates`, the same episode loop and
 figures). Every evaluation of a run starts the same episodes (``eval_seed``), so that two of them differ by the
 policy only. Each line of ``evaluations.jsonl``::
 
@@ -26,8 +26,9 @@ from tqdm import tqdm
 
 from dynpush.sim.config import PushEnvConfig, SamplingConfig
 
-from .evaluate import ActorPolicy, first_episode_rates
+from .episodes import ActorPolicy
 from .progress import EVALUATIONS, read_progress, wall_clock_hours
+from .tables import first_episode_rates
 
 if TYPE_CHECKING:
     from rsl_rl.models import MLPModel

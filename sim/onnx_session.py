@@ -1,7 +1,7 @@
 """ONNX files as the simulator and the tools read them: load with one-line errors, metadata, the input and
 output check, and an onnxruntime session that runs all worlds of an environment in one call.
 
-Used by the legged push environment (its frozen locomotion network) and by ``policies/export.py`` (the push
+Used by the legged push environment (its frozen locomotion network) and by ``policies/onnx_policy.py`` (the push
 policy); ``onnx`` and ``onnxruntime`` only, no torch.
 """
 

@@ -8,9 +8,14 @@ import torch
 import yaml
 
 from dynpush.cli import main
-from dynpush.policies.evaluate import (EE_CONTACT_COLUMN, ContactMotionObserver, EvalConfig, FirstEpisodes, FootprintConfig,
-                                       GoalErrorObserver, evaluate, footprint_study, paper_table_i_row)
-from dynpush.policies.export import build_actor, export_policy
+from dynpush.policies.actor import build_actor
+from dynpush.policies.env_probe import EE_CONTACT_COLUMN
+from dynpush.policies.episodes import FirstEpisodes
+from dynpush.policies.evaluate import EvalConfig, evaluate
+from dynpush.policies.export import export_policy
+from dynpush.policies.footprints import FootprintConfig, footprint_study
+from dynpush.policies.observers import ContactMotionObserver, GoalErrorObserver
+from dynpush.policies.tables import paper_table_i_row
 from dynpush.policies.scenarios import (FACE_NAMES, NO_FACE, contact_face, count_face_switches, load_scenario,
                                         parse_scenario, run_scenario)
 from dynpush.policies.train import TrainConfig, apply_overrides
@@ -120,7 +125,7 @@ def test_goal_errors_of_hand_made_episodes(small_env):
 def test_returns_to_go_of_hand_made_episodes():
     from types import SimpleNamespace
 
-    from dynpush.policies.evaluate import RewardObserver
+    from dynpush.policies.observers import RewardObserver
 
     gamma, rewards = 0.5, [[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]]
     in_episode = [[True, True], [True, False], [True, False]]  # world 1's first episode ends after step 0
@@ -143,7 +148,8 @@ def test_returns_to_go_of_hand_made_episodes():
 def test_constraint_violation_is_the_mean_over_episodes_of_each_ones_share_of_time():
     """Table II: a group violated 10 of 100 steps in one episode and never in a 50-step one is violated 5 % of the time
     (the mean of the episodes' shares, not 10 of 150 pooled steps)."""
-    from dynpush.policies.evaluate import CONSTRAINT_GROUPS, ConstraintObserver
+    from dynpush.kernels.constraints import CONSTRAINT_GROUPS
+    from dynpush.policies.tables import ConstraintObserver
 
     groups = len(CONSTRAINT_GROUPS)
     violated_steps = np.zeros((2, groups), dtype=np.int64)
@@ -208,7 +214,7 @@ def test_contact_motion_of_hand_made_trajectories(small_env):
 
 def test_object_sliding_force_is_mu_m_g_with_the_randomised_combined_friction(small_env):
     """The probe inverts the sampler's object coefficient (2 mu - floor): mu = F / (m g) lies in the task's range."""
-    from dynpush.policies.evaluate import EnvProbe
+    from dynpush.policies.env_probe import EnvProbe
 
     force = EnvProbe(small_env).object_sliding_force()
     mu = force / (small_env.task.object_mass.numpy() * 9.81)
@@ -341,8 +347,8 @@ def test_play_writes_a_picture_and_a_usd_animation(policy, tmp_path):
 def test_legged_evaluation_of_a_tracked_base_policy_uses_todays_legged_settings(tmp_path):
     """A policy trained on the tracked base carries the legged-mode section of its time in its training config;
     evaluating it in legged mode must not inherit those simulator buffers (24 / 64 dropped contacts)."""
-    from dynpush.policies.evaluate import env_config_for
-    from dynpush.policies.export import OnnxPolicy
+    from dynpush.policies.onnx_policy import OnnxPolicy
+    from dynpush.policies.trained_env import env_config_for
     from dynpush.sim.config import LeggedModeConfig
 
     run = tmp_path / "old"

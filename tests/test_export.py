@@ -10,10 +10,12 @@ from tensordict import TensorDict
 
 from dynpush.assets_usd import ARM_JOINT_NAMES
 from dynpush.cli import main
-from dynpush.policies.export import (OnnxPolicy, build_contract, config_sha256, export_policy, load_actor,
-                                     load_run_config, read_metadata)
+from dynpush.policies.actor import load_actor
+from dynpush.policies.export import build_contract, config_sha256, export_policy, load_run_config
+from dynpush.policies.onnx_policy import OnnxPolicy
 from dynpush.policies.train import TrainConfig, apply_overrides, train
 from dynpush.runtime.contract import ContractError, PolicyContract
+from dynpush.sim.onnx_session import read_metadata
 
 
 def tiny_run(run_dir):
@@ -132,7 +134,7 @@ def test_the_same_file_runs_in_warp_nn(exported):
 
 
 def test_an_exported_actor_loads_back_into_a_new_actor(exported):
-    from dynpush.policies.export import build_actor, load_onnx_actor
+    from dynpush.policies.actor import build_actor, load_onnx_actor
 
     run, path = exported
     cfg = load_run_config(run)

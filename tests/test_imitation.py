@@ -29,7 +29,9 @@ def expert_loss(actor: torch.nn.Module, observations: torch.Tensor, labels: torc
 
 
 def test_dagger_fits_the_expert_and_its_checkpoint_exports_and_fine_tunes(tmp_path):
-    from dynpush.policies.export import OnnxPolicy, export_policy, load_actor
+    from dynpush.policies.actor import load_actor
+    from dynpush.policies.export import export_policy
+    from dynpush.policies.onnx_policy import OnnxPolicy
 
     run = tmp_path / "bc"
     checkpoint = imitate(tiny(), tiny_imitation(2), run)

@@ -4,8 +4,11 @@ Layers, lowest first: ``assets_usd`` -> ``kernels`` -> ``sim`` -> ``policies`` -
 may import its own layer or a lower one, never a higher one. ``runtime`` stands apart: it depends on numpy and
 onnxruntime only, never on kernels, sim or policies, nor on torch, warp or newton; the layers may take pure
 layout constants from its light modules (``kernels/observations.py`` reads ``runtime/observation.py``).
-No module imports a private (leading underscore) name from another module, and the module-level imports form no
-cycle. The graph is read with ``ast`` from the source, so nothing is imported to check it.
+No module imports a private (leading underscore) name from another module, and the imports that run form no cycle:
+neither those at module level nor those inside functions (a deferred import that closes a circle is a module-level
+one waiting for a caller; the shared code belongs in the lower module). Imports under ``if TYPE_CHECKING:`` never
+run and are left out of the cycle check: annotations may name a higher module's types. The graph is read with
+``ast`` from the source, so nothing is imported to check it.
 """
 
 from __future__ import annotations
@@ -80,11 +83,12 @@ def _resolve(module: str, node: ast.ImportFrom) -> str:
     return ".".join(base + ([node.module] if node.module else []))
 
 
-def _imports(module: str, top_level_only: bool) -> list[tuple[str, list[str], int]]:
+def _imports(module: str, top_level_only: bool, type_checking: bool = True) -> list[tuple[str, list[str], int]]:
     """(imported module, imported names, line) for every import in ``module``.
 
     ``top_level_only`` keeps the imports that run when the module is imported (module body, including ``if``
-    and ``try`` blocks, but not function bodies or ``TYPE_CHECKING`` blocks).
+    and ``try`` blocks, but not function bodies or ``TYPE_CHECKING`` blocks). ``type_checking=False`` leaves out
+    the imports of ``TYPE_CHECKING`` blocks, which never run.
     """
     tree = ast.parse(MODULES[module].read_text(), filename=str(MODULES[module]))
     found: list[tuple[str, list[str], int]] = []
@@ -111,7 +115,8 @@ def _imports(module: str, top_level_only: bool) -> list[tuple[str, list[str], in
                 visit(ast.iter_child_nodes(node), True)
             elif isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
                 visit(node.orelse, deferred)
-                visit(node.body, True)
+                if type_checking:
+                    visit(node.body, True)
             else:
                 visit(ast.iter_child_nodes(node), deferred)
 
@@ -218,18 +223,23 @@ def test_no_private_name_across_modules():
     assert not bad, "private names stay in their module:\n" + "\n".join(bad)
 
 
-def test_no_import_cycle():
-    graph = {m: set() for m in MODULES}
+def _import_graph(top_level_only: bool) -> dict[str, dict[str, int]]:
+    """Module -> {imported module of this repository: line of the first such import}, for the imports that run:
+    at module level, and inside functions too unless ``top_level_only``."""
+    graph: dict[str, dict[str, int]] = {m: {} for m in MODULES}
     for module in MODULES:
-        for target, _, _ in _imports(module, top_level_only=True):
+        for target, _, line in _imports(module, top_level_only, type_checking=False):
             # Importing a.b.c runs a/__init__ and a/b/__init__ as well.
             parts = target.split(".")
             for i in range(1, len(parts) + 1):
                 name = _internal(".".join(parts[:i]))
                 if name is not None and name != module:
-                    graph[module].add(name)
+                    graph[module].setdefault(name, line)
+    return graph
 
-    # Tarjan's strongly connected components.
+
+def _cycles(graph: dict[str, dict[str, int]]) -> list[set[str]]:
+    """The strongly connected components of more than one module (Tarjan)."""
     index: dict[str, int] = {}
     low: dict[str, int] = {}
     stack: list[str] = []
@@ -262,5 +272,23 @@ def test_no_import_cycle():
     for v in sorted(graph):
         if v not in index:
             strong(v)
-    cycles = [c for c in cycles if c not in ALLOWED_CYCLES]
-    assert not cycles, "module-level import cycles:\n" + "\n".join(" <-> ".join(sorted(c)) for c in cycles)
+    return [c for c in cycles if c not in ALLOWED_CYCLES]
+
+
+def _describe(graph: dict[str, dict[str, int]], cycles: list[set[str]]) -> str:
+    """Each cycle's modules and the imports (module:line -> module) that join them."""
+    return "\n".join(" <-> ".join(sorted(c)) + "".join(
+        f"\n    {m}:{graph[m][t]} -> {t}" for m in sorted(c) for t in sorted(graph[m]) if t in c) for c in cycles)
+
+
+def test_no_import_cycle():
+    graph = _import_graph(top_level_only=True)
+    cycles = _cycles(graph)
+    assert not cycles, "module-level import cycles:\n" + _describe(graph, cycles)
+
+
+def test_no_import_cycle_through_imports_inside_functions():
+    graph = _import_graph(top_level_only=False)
+    cycles = _cycles(graph)
+    assert not cycles, ("import cycles (imports inside functions included); move the shared code to the lower module:\n"
+                        + _describe(graph, cycles))

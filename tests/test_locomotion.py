@@ -12,7 +12,8 @@ import torch
 from dynpush.assets_usd import LEG_JOINT_NAMES
 from dynpush.cli import main
 from dynpush.kernels import locomotion as loco
-from dynpush.policies.export import load_actor, load_run_config
+from dynpush.policies.actor import load_actor
+from dynpush.policies.export import load_run_config
 from dynpush.policies.locomotion_export import export_locomotion
 from dynpush.policies.locomotion_train import LocomotionTrainConfig
 from dynpush.runtime.errors import StartupError

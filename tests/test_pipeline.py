@@ -32,7 +32,7 @@ def test_train_export_and_run_the_policy_in_sim2sim(tmp_path):
 
 
 def test_ship_writes_a_consistent_shipment(tmp_path):
-    from dynpush.policies.export import OnnxPolicy
+    from dynpush.policies.onnx_policy import OnnxPolicy
     from dynpush.policies.ship import ship
 
     runs = tmp_path / "runs"

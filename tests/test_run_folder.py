@@ -159,7 +159,7 @@ def test_evaluations_during_training_leave_the_training_unchanged(tmp_path):
 
 
 def test_every_evaluation_starts_the_same_episodes_on_the_papers_task(tmp_path):
-    from dynpush.policies.export import build_actor
+    from dynpush.policies.actor import build_actor
     from dynpush.policies.training_eval import PeriodicEvaluation
 
     cfg = tiny(1, "env.episode_length_s=0.2", "eval_episodes=2", "eval_interval=1", "env.sampling.goal_radius=(0.0, 0.1)")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from dynpush.policies.evaluate import yaw_of
+from dynpush.policies.env_probe import yaw_of
 from dynpush.policies.scripted import ScriptedPusher, ScriptedPusherConfig, wrap
 from dynpush.sim.episode import EpisodeSpec
 from warp_numpy_helpers import quat_mul

@@ -4,7 +4,7 @@ import json
 import subprocess
 import sys
 
-from dynpush.policies.export import OnnxPolicy
+from dynpush.policies.onnx_policy import OnnxPolicy
 from dynpush.shipped import SHIPPED_DIR, shipped_file, training_record
 
 

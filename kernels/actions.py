@@ -1,4 +1,9 @@
-"""Action processing (paper III-C): deviations about the default base state and arm configuration."""
+"""Action processing (paper III-C): deviations about the default base state and arm configuration.
+
+The mapping is defined once, in numpy, by ``dynpush.runtime.actions`` (the deployment runtime applies it to the ONNX
+output); this kernel is the same formula for all worlds on the simulator's device, launched with the parameters of
+``PushEnv.action_mapping``, and ``tests/test_action_mapping.py`` checks that both agree on random actions.
+"""
 
 import warp as wp
 
@@ -30,7 +35,8 @@ def process_actions(
 
     ``u_base^cmd = base_default + base_scale * a[0:6]`` (vx, vy [m/s] and yaw rate [rad/s] in the
     heading frame; roll, pitch [rad]; height [m]); ``q_j^cmd = q_default + arm_scale * a[6:11]``
-    [rad] goes to the arm's joint position drives. Non-finite actions count as zero.
+    [rad] goes to the arm's joint position drives (``task.arm_default`` holds ``q_default``), with ``a``
+    clipped to ``+-clip``. Non-finite actions count as zero, so that one diverged world cannot poison the batch.
     """
     w = wp.tid()
     for i in range(NUM_ACTIONS):

@@ -6,14 +6,14 @@ Every array indexed by ``w`` has one entry per world (environment). Frames: ``_w
 
 import warp as wp
 
-# The push policy's sizes are defined once, by the runtime's numpy observation builder (the runtime checks an ONNX
-# file against them); the kernels import them from here. 5 arm joints act, the 6th DynaArm joint is frozen (paper
-# III); 11 actions, (vx, vy, yaw rate, roll, pitch, height) + the 5 arm joints (III-C); 54 actor observations
-# (Table "Observations").
+# The push policy's sizes are defined once, by the runtime's numpy observation builder and action mapping (the
+# runtime checks an ONNX file against them); the kernels import them from here. 5 arm joints act, the 6th DynaArm
+# joint is frozen (paper III); 11 actions, (vx, vy, yaw rate, roll, pitch, height) + the 5 arm joints (III-C); 54
+# actor observations (Table "Observations").
+from dynpush.runtime.actions import NUM_BASE_COMMANDS  # noqa: F401
 from dynpush.runtime.observation import NUM_ACTIONS, NUM_ARM_JOINTS  # noqa: F401
 from dynpush.runtime.observation import POLICY_OBSERVATION_SIZE as NUM_POLICY_OBS  # noqa: F401
 
-NUM_BASE_COMMANDS = NUM_ACTIONS - NUM_ARM_JOINTS  # 6: the base command's share of the actions
 NUM_CRITIC_OBS = 73
 NUM_COLLISIONS = 18
 CONTACT_COLUMNS = NUM_COLLISIONS + 1  # the undesired collisions, then the EE-object contact state

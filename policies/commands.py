@@ -40,7 +40,7 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _is_locomotion_policy(path: Path) -> bool:
-    from dynpush.runtime.locomotion import LOCOMOTION_CONTRACT_KEY
+    from dynpush.runtime.locomotion_contract import LOCOMOTION_CONTRACT_KEY
     from dynpush.sim.onnx_session import load_onnx, read_metadata
 
     return path.exists() and LOCOMOTION_CONTRACT_KEY in read_metadata(load_onnx(path))

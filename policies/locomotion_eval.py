@@ -56,7 +56,8 @@ def evaluate_locomotion(path: Path, cfg: LocomotionEvalConfig, out_dir: Path) ->
     for item in cfg.overrides:
         if not item.startswith("env."):
             raise ConfigError(f"a locomotion evaluation takes env.* overrides only, got {item!r}")
-    env_cfg = apply_overrides(LocomotionTrainConfig.from_dict(network.contract["training_config"]), list(cfg.overrides)).env
+    trained = LocomotionTrainConfig.from_dict(network.contract.values["training_config"])
+    env_cfg = apply_overrides(trained, list(cfg.overrides)).env
     env_cfg.num_envs, env_cfg.seed, env_cfg.randomize_first_episode_length = cfg.num_envs, cfg.seed, False
     env_cfg.episode_length_s = cfg.seconds + env_cfg.control_dt  # no time-out inside the evaluation
     if cfg.noise is not None:

@@ -3,10 +3,10 @@
 ``locomotion.onnx``: input ``obs`` [1, 61] float32, the un-normalised observation in the layout of
 ``dynpush.kernels.locomotion.POLICY_TERMS`` (every term of the runtime's ``LOCOMOTION_TERMS``, scale 1);
 output ``actions`` [1, 12] float32, the deterministic mean before the environment's clip. Leg targets
-``default + action_scale * actions`` in ``LEG_JOINT_NAMES`` order. The metadata holds the runtime's
+``default + action_scale * actions`` in ``LEG_JOINT_NAMES`` order. The metadata holds its
+:class:`~dynpush.runtime.locomotion_contract.LocomotionContract`: the runtime's
 :class:`~dynpush.runtime.config.OnnxLocomotionConfig` fields (checked by the runtime at start-up) plus the
-command limits, joint limits, PD gains, control period and training config;
-``dynpush.runtime.locomotion.read_locomotion_contract`` turns a file back into the runtime's config section.
+command limits, joint limits, PD gains, control period and training config.
 """
 
 from __future__ import annotations
@@ -17,8 +17,9 @@ from typing import TYPE_CHECKING
 
 from dynpush.assets_usd import LEG_JOINT_NAMES
 from dynpush.kernels.locomotion import NUM_LEG_JOINTS, NUM_POLICY_OBS, POLICY_TERMS
+from dynpush.runtime.actions import BASE_COMMAND_NAMES
 from dynpush.runtime.config import LocomotionTerm, OnnxLocomotionConfig
-from dynpush.runtime.locomotion import locomotion_contract
+from dynpush.runtime.locomotion_contract import LocomotionContract
 
 from .actor import load_actor
 from .export import config_sha256, load_run_config, resolve_checkpoint, write_onnx
@@ -51,9 +52,9 @@ def export_locomotion(run_dir: Path, checkpoint: str | None = None, out: Path | 
     out = Path(out) if out is not None else run_dir / "locomotion.onnx"
     robot = legged_robot_builder()[1]
     training_config = json.loads(json.dumps(cfg.to_dict()))
-    metadata = locomotion_contract(
+    metadata = LocomotionContract.metadata(
         runtime_section(cfg, robot, out.name),
-        command_names=["vx", "vy", "yaw_rate", "roll", "pitch", "height"],
+        command_names=list(BASE_COMMAND_NAMES),
         command_lower=list(cfg.env.commands.lower),
         command_upper=list(cfg.env.commands.upper),
         action_clip=cfg.env.action_clip,

@@ -115,8 +115,7 @@ class ScriptedPusher:
     def __init__(self, env, cfg: ScriptedPusherConfig | None = None):
         self.env, self.cfg, self.probe = env, cfg or ScriptedPusherConfig(), EnvProbe(env)
         self.cfg.validate()
-        self.base_default = np.asarray(env.cfg.actions.base_default)
-        self.base_scale = np.asarray(env.cfg.actions.base_scale)
+        self.base_command = env.action_mapping.base  # the 6D command's default and its actions
         rewards = env.cfg.rewards
         self.done_distance = 0.6 * rewards.success_distance
         self.done_angle = 0.6 * np.radians(rewards.success_angle_deg)
@@ -208,10 +207,10 @@ class ScriptedPusher:
         done = (distance < self.done_distance) & (np.abs(yaw_error) < self.done_angle)
         vx, vy, yaw_rate = np.where(done, -0.3, vx), np.where(done, 0.0, vy), np.where(done, 0.0, yaw_rate)
         low = ~go_around | done  # the push pose, except while walking around the object
-        pitch = np.where(low, cfg.push_pitch, self.base_default[4])
-        height = np.where(low, cfg.push_height, self.base_default[5])
+        pitch = np.where(low, cfg.push_pitch, self.base_command.default[4])
+        height = np.where(low, cfg.push_height, self.base_command.default[5])
         command = np.stack([vx, vy, yaw_rate, 0 * vx, pitch, height], axis=1)
         actions = np.zeros((self.env.num_envs, self.env.num_actions), dtype=np.float32)
-        actions[:, :6] = (command - self.base_default) / self.base_scale
+        actions[:, :6] = self.base_command.actions(command)
         actions[:, 6:] = np.where(low[:, None], np.asarray(cfg.push_arm_action), np.asarray(cfg.carry_arm_action))
         return actions

@@ -5,10 +5,10 @@
 with the runtime's own datagrams (``dynpush.runtime.packets``):
 
 - **commands in** (``DPC1``): the onboard locomotion is the tracked base, so the 6D base command and
-  the 5 arm targets become the PushEnv's actions through the policy's contract,
-  ``a_base = (u - base_command_default) / base_command_scale``, ``a_arm = (q - arm_default) /
-  arm_action_scale``. Mode stop (or no command yet): zero base command, arm targets at the measured
-  joint positions.
+  the 5 arm targets become the PushEnv's actions through the inverse of its action mapping
+  (``dynpush.runtime.actions``; the policy's contract must hold the same parameters), which the environment's
+  step maps back. Mode stop (or no command yet): the default base command (zero velocities), arm targets at
+  the measured joint positions.
 - **mocap out** (``DPM1``), once per control step: base and object poses (world Z-up, m, (x, y, z, w))
   plus Gaussian position noise (``mocap_noise_m`` std per axis) and a random rotation (rotation vector
   with ``mocap_noise_rad`` std per axis); each frame dropped with probability ``drop`` and delivered
@@ -53,7 +53,7 @@ import torch
 
 from dynpush.runtime.contract import PolicyContract
 from dynpush.runtime.frames import quat_multiply
-from dynpush.runtime.observation import NUM_ACTIONS, NUM_ARM_JOINTS, quat_to_matrix
+from dynpush.runtime.observation import NUM_ARM_JOINTS, quat_to_matrix
 from dynpush.runtime.packets import (
     GOAL_SET, MODE_STOP, GoalCommand, MocapBody, MocapFrame, PacketError, Proprioception, RobotCommand,
     decode_command, encode_goal, encode_mocap, encode_state,
@@ -99,17 +99,19 @@ class SimToSimConfig:
 
 def check_contract_matches_env(contract: PolicyContract, env) -> None:
     """The contract's action mapping must be the environment's (a mismatch would mistranslate commands)."""
-    cfg, arm_default = env.cfg, env.scene.robot.arm_default[:NUM_ARM_JOINTS]
+    mapping = env.action_mapping
     pairs = {
-        "base_command_default": (contract.base_command_default, cfg.actions.base_default),
-        "base_command_scale": (contract.base_command_scale, cfg.actions.base_scale),
-        "arm_action_scale": ([contract.arm_action_scale], [cfg.actions.arm_scale]),
-        "arm_default_joint_positions": (contract.arm_default_joint_positions, arm_default),
-        "control_period_s": ([contract.control_period_s], [cfg.control_dt]),
+        "base_command_default": (contract.base_command_default, mapping.base.default),
+        "base_command_scale": (contract.base_command_scale, mapping.base.scale),
+        "arm_action_scale": (contract.arm_action_scale, mapping.arm.scale),
+        "arm_default_joint_positions": (contract.arm_default_joint_positions, mapping.arm.default),
+        "action_clip": (contract.action_clip, mapping.clip),
+        "control_period_s": (contract.control_period_s, env.cfg.control_dt),
     }
     for name, (ours, theirs) in pairs.items():
         if not np.allclose(ours, theirs, rtol=1e-6, atol=1e-9):
-            raise ValueError(f"policy contract {name} {list(ours)} differs from the simulator's {list(theirs)}")
+            raise ValueError(f"policy contract {name} {np.asarray(ours).tolist()} differs from the simulator's"
+                             f" {np.asarray(theirs).tolist()}")
 
 
 def _rotation_vector_quat(v: np.ndarray) -> np.ndarray:
@@ -136,11 +138,6 @@ class SimRobot:
         self._base_body = scene.base_body[0]
         self.legged = self.env.cfg.legged.enabled
         self._leg_default = scene.robot.legged.leg_default if self.legged else None
-        c = self.contract
-        self._base_default = np.asarray(c.base_command_default)
-        self._base_scale = np.asarray(c.base_command_scale)
-        self._arm_default = np.asarray(c.arm_default_joint_positions)
-        self._arm_scale = c.arm_action_scale
         self.dt = self.env.cfg.control_dt
         self._latency_steps = int(round(cfg.latency_s / self.dt))
         self._rng = np.random.default_rng(cfg.seed)
@@ -162,13 +159,12 @@ class SimRobot:
                 self.malformed_commands += 1
 
     def actions(self) -> torch.Tensor:
-        a = np.zeros(NUM_ACTIONS)
-        command = self.command
+        """The environment's actions (1, 11) whose commands, as its step maps them, are the latest command's."""
+        mapping, command = self.env.action_mapping, self.command
         if command is None or command.mode == MODE_STOP:
-            a[6:] = (self.probe.arm_q()[0] - self._arm_default) / self._arm_scale
+            a = mapping.actions(mapping.base.default, self.probe.arm_q()[0])
         else:
-            a[:6] = (command.base_command - self._base_default) / self._base_scale
-            a[6:] = (command.arm_targets - self._arm_default) / self._arm_scale
+            a = mapping.actions(command.base_command, command.arm_targets)
         if self.legged:
             given = command is not None and len(command.leg_targets) == len(self._leg_default)
             self.env.set_leg_targets((command.leg_targets if given else self._leg_default)[None])

@@ -3,8 +3,9 @@
 Motion capture and robot state in, push policy (and optionally a locomotion ONNX) at 50 Hz, joint
 targets and the 6D base command out, every tick logged. Modules, one job each:
 
-- ``observation``: the 54-d actor observation (equal to the simulator's kernel); ``contract``: the
-  ONNX metadata contract between training and deployment
+- ``observation``: the 54-d actor observation (equal to the simulator's kernel); ``actions``: the push
+  policy's actions as commands (equal to the simulator's kernel); ``contract``: the ONNX metadata contract
+  between training and deployment; ``locomotion_contract``: a locomotion ONNX's contract
 - ``config``: the YAML configuration; ``frames``: poses and frame conventions; ``packets``: the UDP
   datagrams; ``udp``: the socket; ``trust``: which senders and datagrams a receiver admits
 - ``mocap``: pose sources; ``robot_link``: state in, commands out; ``goals``: object goals

@@ -15,12 +15,12 @@ from dataclasses import asdict, dataclass, field, fields
 
 from dynpush.errors import UserError
 
+from .actions import ACTION_LAYOUT, BASE_COMMAND_NAMES, ActionMapping, ActionScaling
 from .observation import NUM_ACTIONS, POLICY_OBSERVATION_LAYOUT
 
 CONTRACT_VERSION = "1"
 INPUT_NAME = "obs"
 OUTPUT_NAME = "actions"
-BASE_COMMAND_NAMES = ("vx", "vy", "yaw_rate", "roll", "pitch", "height")
 QUATERNION_ORDER = "xyzw"
 OBSERVATION_FRAMES = {
     "ee_to_object_b": "base frame, m: R_b^T (p_ee - p_object)",
@@ -46,7 +46,7 @@ class PolicyContract:
 
     observation_layout: list[tuple[str, int]] = field(default_factory=lambda: [list(t) for t in POLICY_OBSERVATION_LAYOUT])
     observation_noise: dict[str, float] = field(default_factory=dict)  # training noise half-widths (not applied at runtime)
-    action_layout: list[tuple[str, int]] = field(default_factory=lambda: [["base_command", 6], ["arm_joint_position", 5]])
+    action_layout: list[tuple[str, int]] = field(default_factory=lambda: [list(t) for t in ACTION_LAYOUT])
     base_command_names: list[str] = field(default_factory=lambda: list(BASE_COMMAND_NAMES))
     base_command_default: list[float] = field(default_factory=list)  # (6,)
     base_command_scale: list[float] = field(default_factory=list)  # (6,)
@@ -70,6 +70,11 @@ class PolicyContract:
     training_config: dict = field(default_factory=dict)
     training_config_sha256: str = ""
     contract_version: str = CONTRACT_VERSION
+
+    def action_mapping(self) -> ActionMapping:
+        """How this policy's actions become the base command and the arm targets (``actions.py``)."""
+        return ActionMapping(ActionScaling(self.base_command_default, self.base_command_scale),
+                             ActionScaling(self.arm_default_joint_positions, self.arm_action_scale), self.action_clip)
 
     def to_metadata(self) -> dict[str, str]:
         """String key/values for ONNX ``metadata_props`` (JSON for non-strings)."""

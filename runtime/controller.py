@@ -8,9 +8,10 @@ poses from mocap; base twist from the robot's state estimator (base frame, rotat
 with the mocap base orientation, which the observation builder rotates back); end-effector position
 from the robot's arm forward kinematics (base frame, placed in the world with the mocap base pose);
 goal height equal to the object's measured height (planar task). Actions become commands as in
-training: ``u_base = default + scale * a[0:6]``, ``q_arm = default + arm_scale * a[6:11]``, with
-``a`` clipped to ``+-action_clip``. Every command is clamped to its limits and checked before it leaves:
-one with a non-finite value (or beyond a limit) latches STOPPED and is replaced by a stop command.
+training, by the contract's action mapping (actions.py): ``u_base = default + scale * a[0:6]``,
+``q_arm = default + arm_scale * a[6:11]``, with ``a`` clipped to ``+-action_clip``. Every command is
+clamped to its limits and checked before it leaves: one with a non-finite value (or beyond a limit)
+latches STOPPED and is replaced by a stop command.
 """
 
 from __future__ import annotations
@@ -63,16 +64,12 @@ class Controller:
         self.safety = SafetyMachine(cfg.robot.timeout_s, cfg.mocap.timeout_s, math.radians(cfg.safety.max_tilt_deg))
         self._mocap_timeout_s = cfg.mocap.timeout_s
         self._ramp_s = cfg.safety.arm_ramp_s
-        c = contract
-        self._base_default = np.asarray(c.base_command_default, dtype=np.float64)
-        self._base_scale = np.asarray(c.base_command_scale, dtype=np.float64)
-        self._arm_default = np.asarray(c.arm_default_joint_positions, dtype=np.float64)
-        self._arm_scale = c.arm_action_scale
-        self._clip = c.action_clip
+        self._mapping = contract.action_mapping()
+        self._arm_default = self._mapping.arm.default
         self._last_actions = np.zeros(NUM_ACTIONS)
         self._arm_hold = self._arm_default.copy()
         self._leg_joints = NUM_LEG_JOINTS if locomotion else 0
-        self._leg_hold = locomotion.default_joint_positions.copy() if locomotion else np.zeros(0)
+        self._leg_hold = locomotion.legs.default.copy() if locomotion else np.zeros(0)
         self._ramp_from = self._arm_default.copy()
         self._ramp_start = 0.0
         self._ramp_done = False
@@ -154,7 +151,7 @@ class Controller:
     def _commands(self, now: float, state: State, actions: np.ndarray | None,
                   robot: ReceivedState | None) -> tuple[State, np.ndarray, np.ndarray, np.ndarray]:
         """The clamped base command, arm and leg targets of ``state`` (which a locomotion fault may turn STOPPED)."""
-        base_command = self._base_default.copy()
+        base_command = self._mapping.base.default.copy()
         arm_targets = self._arm_hold.copy()
         clipped = None
         if state == State.RAMP:
@@ -162,9 +159,8 @@ class Controller:
             arm_targets = self._ramp_from + alpha * (self._arm_default - self._ramp_from)
             self._ramp_done = alpha >= 1.0  # the default pose has been commanded
         elif state == State.PUSH:
-            clipped = np.clip(actions, -self._clip, self._clip)
-            base_command = self._base_default + self._base_scale * clipped[:6]
-            arm_targets = self._arm_default + self._arm_scale * clipped[6:]
+            clipped = self._mapping.clipped(actions)
+            base_command, arm_targets = self._mapping.commands(clipped)
         leg_targets = self._leg_hold.copy()
         if self.locomotion is not None and state in ACTIVE_STATES:
             leg_targets = self.locomotion.step(robot.state, base_command)
@@ -177,8 +173,7 @@ class Controller:
         if state in ACTIVE_STATES:
             self._arm_hold, self._leg_hold = arm_targets, leg_targets
             # a_{t-1} of the next observation: the policy's clipped output, or what was applied, as actions
-            self._last_actions = clipped if clipped is not None else np.concatenate([
-                (base_command - self._base_default) / self._base_scale, (arm_targets - self._arm_default) / self._arm_scale])
+            self._last_actions = clipped if clipped is not None else self._mapping.actions(base_command, arm_targets)
         return state, base_command, arm_targets, leg_targets
 
     def stop(self, now: float, reason: str) -> RobotCommand:
@@ -190,7 +185,7 @@ class Controller:
 
     def _stop_targets(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """What a stop command carries: the default base command and the last targets that passed the check."""
-        targets = self._base_default.copy(), self._arm_hold.copy(), self._leg_hold.copy()
+        targets = self._mapping.base.default.copy(), self._arm_hold.copy(), self._leg_hold.copy()
         self.limits.clamp(*targets)  # finite: validated defaults, or targets that passed this check
         return targets
 

@@ -14,12 +14,11 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 
+from .actions import ACTION_LAYOUT, BASE_COMMAND_NAMES
 from .config import RuntimeConfig
-from .contract import BASE_COMMAND_NAMES, INPUT_NAME, OUTPUT_NAME, ContractError, PolicyContract
+from .contract import INPUT_NAME, OUTPUT_NAME, ContractError, PolicyContract
 from .errors import StartupError
 from .observation import NUM_ACTIONS, POLICY_OBSERVATION_SIZE
-
-ACTION_LAYOUT = [("base_command", 6), ("arm_joint_position", 5)]
 
 
 def session_options() -> ort.SessionOptions:
@@ -80,8 +79,8 @@ def check_contract(contract: PolicyContract, cfg: RuntimeConfig) -> None:
     """Raises :class:`StartupError` listing every mismatch between the policy's contract and the config."""
     problems = []
     layout = [(str(n), int(s)) for n, s in contract.action_layout]
-    if layout != ACTION_LAYOUT:
-        problems.append(f"action_layout {layout} differs from this runtime's {ACTION_LAYOUT}")
+    if layout != list(ACTION_LAYOUT):
+        problems.append(f"action_layout {layout} differs from this runtime's {list(ACTION_LAYOUT)}")
     if list(contract.base_command_names) != list(BASE_COMMAND_NAMES):
         problems.append(f"base_command_names {contract.base_command_names} differ from {list(BASE_COMMAND_NAMES)}")
     if list(contract.arm_joint_names) != list(cfg.robot.arm_joint_names):

@@ -41,7 +41,7 @@ from dynpush.errors import UserError
 
 from .app import Runtime
 from .config import LOOPBACK, GoalsConfig, MocapConfig, RuntimeConfig, RuntimeConfigError, load_config
-from .locomotion import read_locomotion_contract
+from .locomotion_contract import LocomotionContract
 
 EVENT_PREFIX = "SIM2SIM "
 ON_SLOW = ("lockstep", "stop")  # what a real-time run does once the simulator falls behind the control rate
@@ -95,11 +95,11 @@ def runtime_config(options: SimToSimOptions) -> RuntimeConfig:
                                  f" sim2sim's locomotion_policy (--locomotion onnx), got {cfg.locomotion.mode!r}")
     cfg.push_policy.path = policy
     if options.locomotion_policy:
-        section, contract = read_locomotion_contract(str(Path(options.locomotion_policy).resolve()))
-        cfg.locomotion.mode, cfg.locomotion.onnx = "onnx", section
-        cfg.robot.leg_joint_names = list(section.joint_names)
-        cfg.safety.leg_joint_lower = [float(v) for v in contract["joint_lower"]]
-        cfg.safety.leg_joint_upper = [float(v) for v in contract["joint_upper"]]
+        path = str(Path(options.locomotion_policy).resolve())
+        contract = LocomotionContract.read(path)
+        cfg.locomotion.mode, cfg.locomotion.onnx = "onnx", contract.section(path)
+        cfg.robot.leg_joint_names = list(contract.joint_names)
+        cfg.safety.leg_joint_lower, cfg.safety.leg_joint_upper = list(contract.joint_lower), list(contract.joint_upper)
     cfg.mocap = MocapConfig(source="udp", port=0, timeout_s=cfg.mocap.timeout_s)
     cfg.robot.bind_address, cfg.robot.port, cfg.robot.robot_address = LOOPBACK, 0, ""
     cfg.robot.allowed_senders = [LOOPBACK]  # the simulator, whatever robot the config names

@@ -17,6 +17,7 @@ and observations. Without a locomotion policy (``legged.locomotion_policy = ""``
 from __future__ import annotations
 
 import itertools
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -24,7 +25,8 @@ import warp as wp
 
 from dynpush.kernels import locomotion as loco
 from dynpush.kernels.constraints import CONSTRAINT_GROUPS
-from dynpush.runtime.locomotion import LOCOMOTION_CONTRACT_KEY
+from dynpush.runtime.actions import ActionScaling
+from dynpush.runtime.locomotion_contract import LocomotionContract
 
 from .push_env import PushEnv
 from .legged_scene import legged_view, locomotion_task
@@ -34,26 +36,24 @@ LEG_TORQUE_COLUMN = sum(size for _, size in itertools.takewhile(lambda group: gr
 
 
 class LocomotionNetwork:
-    """A ``locomotion.onnx`` (``dynpush export`` of a locomotion run) run by onnxruntime on all worlds at once."""
+    """A ``locomotion.onnx`` (``dynpush export`` of a locomotion run) run by onnxruntime on all worlds at once.
+
+    Its contract is read as the runtime reads it (``dynpush.runtime.locomotion_contract``); the simulator writes
+    the observation of ``kernels/locomotion.py`` (``POLICY_TERMS``, unscaled), so the network must read that one.
+    """
 
     def __init__(self, path: str):
-        import json
+        from .onnx_session import batched_session, load_onnx, read_metadata
 
-        import onnx
-
-        from .onnx_session import batched_session, read_metadata
-
-        model = onnx.load(path)
-        metadata = read_metadata(model)
-        if LOCOMOTION_CONTRACT_KEY not in metadata:
-            raise ValueError(f"{path} has no {LOCOMOTION_CONTRACT_KEY} metadata: not a dynpush locomotion policy")
-        self.contract = json.loads(metadata[LOCOMOTION_CONTRACT_KEY])
-        terms = [(t["name"], t["scale"]) for t in self.contract["observation"]]
-        if terms != [(name, 1.0) for name, _ in loco.POLICY_TERMS]:
-            raise ValueError(f"{path}: observation {terms} differs from the simulator's {list(loco.POLICY_TERMS)} (scale 1)")
+        model = load_onnx(Path(path))
+        self.contract = LocomotionContract.from_metadata(read_metadata(model), path)
+        observation, terms = list(self.contract.observation), [(name, 1.0) for name, _ in loco.POLICY_TERMS]
+        if observation != terms:
+            raise ValueError(f"{path}: observation {observation} differs from the simulator's {terms}")
         self.session = batched_session(model, "obs", loco.NUM_POLICY_OBS, "actions", loco.NUM_LEG_JOINTS, path)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
+        """Leg actions [B, 12] (float32) of the locomotion observations ``obs`` [B, 61] (float32)."""
         return self.session.run(["actions"], {"obs": obs})[0]
 
 
@@ -101,14 +101,17 @@ class LeggedPushEnv(PushEnv):
         action_scale = 0.5  # external leg targets (set_leg_targets) pass through any scale unchanged
         if self.locomotion is not None:
             contract = self.locomotion.contract
-            if not np.allclose(contract["default_joint_positions"], legs.leg_default, atol=1e-5):
+            if not np.allclose(contract.default_joint_positions, legs.leg_default, atol=1e-5):
                 raise ValueError(f"{self.cfg.legged.locomotion_policy}: default_joint_positions"
-                                 f" {contract['default_joint_positions']} differ from robot_legged.usda's {legs.leg_default.tolist()}")
-            action_scale = float(contract["action_scale"])
+                                 f" {list(contract.default_joint_positions)} differ from robot_legged.usda's"
+                                 f" {legs.leg_default.tolist()}")
+            action_scale = contract.action_scale
+        # Leg actions -> leg targets [rad]: the parameters of process_leg_actions.
+        self.leg_scaling = ActionScaling(legs.leg_default, action_scale)
         p = loco.LocomotionParams()
-        p.leg_default = f32(legs.leg_default)
+        p.leg_default = f32(self.leg_scaling.default)
         p.arm_default = f32(self.scene.robot.arm_default)
-        p.action_scale, p.clip = action_scale, self.cfg.actions.clip
+        p.action_scale, p.clip = float(self.leg_scaling.scale), self.cfg.actions.clip
         self.leg_params = p
         lim = loco.LeggedLimits()
         lim.stiffness, lim.damping, lim.effort_limit = f32(legs.leg_stiffness), f32(legs.leg_damping), f32(legs.leg_effort_limit)
@@ -157,8 +160,7 @@ class LeggedPushEnv(PushEnv):
         targets = np.asarray(targets, dtype=np.float32)
         if targets.shape != (self.num_envs, loco.NUM_LEG_JOINTS) or not np.all(np.isfinite(targets)):
             raise ValueError(f"leg targets must be finite with shape ({self.num_envs}, 12), got {targets.shape}")
-        default = self.scene.robot.legged.leg_default
-        self.leg_actions.assign((targets - default) / self.leg_params.action_scale)
+        self.leg_actions.assign(self.leg_scaling.actions(targets))
 
     def step(self, actions: torch.Tensor):
         self.actions_t.copy_(actions)

@@ -19,6 +19,7 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from dynpush.kernels import locomotion as k
+from dynpush.runtime.actions import BASE_COMMAND_NAMES
 
 from .config import ConfigError
 from .env_state import ConstraintEpisodeStats, EnvBase, articulation_reset_mask
@@ -29,7 +30,7 @@ wp.config.enable_backward = False
 
 CONSTRAINT_GROUPS = k.CONSTRAINT_GROUPS
 REWARD_TERMS = k.REWARD_TERMS
-COMMAND_NAMES = ("vx", "vy", "yaw_rate", "roll", "pitch", "height")
+COMMAND_NAMES = BASE_COMMAND_NAMES  # the locomotion command is the push policy's base command
 
 
 class LocomotionEnv(EnvBase, VecEnv):

@@ -30,6 +30,7 @@ from dynpush.kernels import (
     terminations,
 )
 from dynpush.kernels.views import CONTACT_COLUMNS, NUM_ACTIONS, NUM_ARM_JOINTS, NUM_CRITIC_OBS, NUM_POLICY_OBS, PushTask, RobotView
+from dynpush.runtime.actions import ActionMapping, ActionScaling
 
 from .config import ConfigError, PushEnvConfig
 from .env_state import ConstraintEpisodeStats, EnvBase, articulation_reset_mask
@@ -57,6 +58,10 @@ class PushEnv(EnvBase, VecEnv):
         self.constraint_groups = list(CONSTRAINT_GROUPS)
         with wp.ScopedDevice(self.wp_device):
             self.scene = self._build_scene()
+            # How actions become commands (the runtime's numpy definition): the action kernel's parameters.
+            a, arm_default = cfg.actions, self.scene.robot.arm_default[:NUM_ARM_JOINTS]
+            self.action_mapping = ActionMapping(ActionScaling(a.base_default, a.base_scale),
+                                                ActionScaling(arm_default, a.arm_scale), a.clip)
             # Newton averages the two coefficients of a contact: the object's own is 2 * combined - floor.
             if 2.0 * cfg.randomization.friction[0] < self.scene.ground_friction:
                 raise ConfigError(f"randomization.friction[0] must be >= half the floor's coefficient"
@@ -111,7 +116,7 @@ class PushEnv(EnvBase, VecEnv):
         task.object_com_o = zeros(n, wp.vec3)
         task.object_inertia = wp.array(np.ones((n, 3)), dtype=wp.vec3)
         task.object_friction = zeros(n)
-        task.arm_default = wp.array(scene.robot.arm_default[:NUM_ARM_JOINTS], dtype=float)
+        task.arm_default = wp.array(self.action_mapping.arm.default, dtype=float)
         task.actions = zeros((n, NUM_ACTIONS))
         task.last_actions = zeros((n, NUM_ACTIONS))
         task.base_command = zeros((n, 6))
@@ -207,8 +212,8 @@ class PushEnv(EnvBase, VecEnv):
     def _make_params(self) -> None:
         cfg, robot = self.cfg, self.scene.robot
         f32 = lambda a: wp.array(np.asarray(a, dtype=np.float32), dtype=float)  # noqa: E731
-        self.base_default = f32(cfg.actions.base_default)
-        self.base_scale = f32(cfg.actions.base_scale)
+        self.base_default = f32(self.action_mapping.base.default)
+        self.base_scale = f32(self.action_mapping.base.scale)
 
         b = cfg.base
         tracking = base_tracking.BaseTrackingParams()
@@ -343,10 +348,10 @@ class PushEnv(EnvBase, VecEnv):
         self._physics_and_task()
 
     def _process_actions(self) -> None:
-        cfg = self.cfg
+        mapping = self.action_mapping
         with self._stage("kernels"):
             self._launch(actions_k.process_actions, [self.raw_actions, self.views[0], self.task, self.base_default,
-                                                     self.base_scale, cfg.actions.arm_scale, cfg.actions.clip,
+                                                     self.base_scale, float(mapping.arm.scale), mapping.clip,
                                                      self.control.joint_target_q])
 
     def _physics_and_task(self) -> None:

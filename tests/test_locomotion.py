@@ -17,7 +17,8 @@ from dynpush.policies.export import load_run_config
 from dynpush.policies.locomotion_export import export_locomotion
 from dynpush.policies.locomotion_train import LocomotionTrainConfig
 from dynpush.runtime.errors import StartupError
-from dynpush.runtime.locomotion import OnnxLocomotion, read_locomotion_contract
+from dynpush.runtime.locomotion import OnnxLocomotion
+from dynpush.runtime.locomotion_contract import LocomotionContract
 from dynpush.runtime.frames import tilt_angle
 from dynpush.runtime.observation import quat_to_matrix
 from dynpush.runtime.packets import Proprioception
@@ -58,19 +59,20 @@ def test_locomotion_onnx_equals_the_actor_and_carries_its_contract(locomotion_ru
     actor = load_actor(run / "model_1.pt", cfg, loco.NUM_POLICY_OBS, loco.NUM_LEG_JOINTS)
     assert int(actor.obs_normalizer.count) > 0
     obs = observations(actor, 16, seed=2)
-    section, contract_ = read_locomotion_contract(str(path))
+    contract_ = LocomotionContract.read(str(path))
+    section = contract_.section(str(path))
     runtime = OnnxLocomotion(section, robot_contract)
     for o, expected in zip(obs, torch_actions(actor, obs)):
         runtime.model.input[0] = o
         assert np.abs(runtime.model.run() - expected).max() < 1e-5
     assert [t.name for t in section.observation] == [name for name, _ in loco.POLICY_TERMS]
     assert section.joint_names == list(LEG_JOINT_NAMES) and section.action_scale == cfg.env.action_scale
-    assert contract_["command_lower"] == list(cfg.env.commands.lower) and len(contract_["joint_lower"]) == 12
+    assert contract_.values["command_lower"] == list(cfg.env.commands.lower) and len(contract_.joint_lower) == 12
 
 
 def test_runtime_refuses_a_config_that_disagrees_with_the_contract(locomotion_run, robot_contract):
     _, path = locomotion_run
-    section, _ = read_locomotion_contract(str(path))
+    section = LocomotionContract.read(str(path)).section(str(path))
     swapped = dataclasses.replace(section, joint_names=[section.joint_names[1], section.joint_names[0], *section.joint_names[2:]])
     with pytest.raises(StartupError, match=r"locomotion.onnx.joint_names"):
         OnnxLocomotion(swapped, robot_contract)
@@ -86,7 +88,7 @@ def test_runtime_observation_equals_the_warp_kernel(locomotion_run, robot_contra
     torch.manual_seed(1)
     for _ in range(30):
         env.step(0.5 * torch.randn(4, 12))
-    runtime = OnnxLocomotion(read_locomotion_contract(str(path))[0], robot_contract)
+    runtime = OnnxLocomotion(LocomotionContract.read(str(path)).section(str(path)), robot_contract)
     scene = env.scene
     body_q, body_qd = env.state_0.body_q.numpy(), env.state_0.body_qd.numpy()
     joint_q, joint_qd = env.state_0.joint_q.numpy(), env.state_0.joint_qd.numpy()
@@ -213,9 +215,9 @@ def test_sim2sim_with_the_runtime_running_the_locomotion_onnx(locomotion_run, ro
     assert len(obs) >= 20 and np.isfinite(obs).all() and np.isfinite(targets).all()
     leg_q = obs[:, 15:27]  # leg_joint_position: q - default, as the simulator reported q
     assert np.abs(leg_q).max() > 1e-3 and np.ptp(leg_q, axis=0).max() > 1e-3, "the simulator's leg joints reach the runtime"
-    section, _ = read_locomotion_contract(str(path))
-    np.testing.assert_allclose(targets, section.default_joint_positions + section.action_scale * log.column("locomotion_actions"),
-                               atol=1e-5)
+    contract = LocomotionContract.read(str(path))
+    expected = np.asarray(contract.default_joint_positions) + contract.action_scale * log.column("locomotion_actions")
+    np.testing.assert_allclose(targets, expected, atol=1e-5)
 
 
 def test_eval_of_a_locomotion_onnx_writes_tracking_errors_under_the_requested_disturbances(locomotion_run, tmp_path, capsys):
@@ -252,7 +254,7 @@ def test_ship_of_a_locomotion_run_writes_its_onnx_tracking_evaluation_and_proven
     assert record["evaluation"]["tracking_rms"] == evaluation["tracking_rms"] and evaluation["worlds"] == 4
     assert record["evaluation"]["fell_percent"] == evaluation["fell_percent"]
     training_config = json.loads((out / "training_config.json").read_text())
-    assert LocomotionNetwork(str(out / "locomotion.onnx")).contract["training_config"] == training_config
+    assert LocomotionNetwork(str(out / "locomotion.onnx")).contract.values["training_config"] == training_config
     assert training_config == json.loads((run / "config.json").read_text())
 
 

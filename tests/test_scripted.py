@@ -120,7 +120,7 @@ def test_backs_off_an_object_that_tilts(small_env, monkeypatch):
         with monkeypatch.context() as patch:
             patch.setattr(pusher.probe, "object", lambda: pose)
             actions = pusher(None)
-        return actions[:, 0] * pusher.base_scale[0] + pusher.base_default[0]
+        return env.action_mapping.commands(actions)[0][:, 0]
 
     pushing_vx = base_vx(0.0)
     assert (pushing_vx > 0.2).all(), "the expert should be pushing forward after 3 s"

@@ -47,7 +47,8 @@ def test_shipped_locomotion_files_belong_together():
 
     record = training_record("locomotion")
     network = LocomotionNetwork(str(shipped_file("locomotion/locomotion.onnx")))
-    assert network.contract["training_config"] == json.loads(shipped_file("locomotion/training_config.json").read_text())
+    training_config = json.loads(shipped_file("locomotion/training_config.json").read_text())
+    assert network.contract.values["training_config"] == training_config
     evaluation = json.loads(shipped_file("locomotion/locomotion_eval.json").read_text())
     assert record["evaluation"]["tracking_rms"] == evaluation["tracking_rms"]
     assert record["evaluation"]["fell_percent"] == evaluation["fell_percent"]

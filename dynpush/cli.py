@@ -36,14 +36,17 @@ def _env_info(args: argparse.Namespace) -> int:
 def _train(args: argparse.Namespace) -> int:
     from dynpush.policies.locomotion_train import LocomotionTrainConfig
     from dynpush.policies.train import TrainConfig
-    from dynpush.policies.training import apply_overrides, launch_processes, run_config, train
+    from dynpush.policies.training import apply_overrides, launch_processes, read_recipe, run_config, train
     from dynpush.sim.config import ConfigError
 
     started = args.launched_at or time.time()  # --hours counts from the user's launch
     argv = args.argv[args.argv.index("train") + 1 :]
     command = args.launched_as or shlex.join(["dynpush", "train", *argv])  # recorded in the run's launches.jsonl
     config_class = {"push": TrainConfig, "locomotion": LocomotionTrainConfig}[args.task]
-    cfg = apply_overrides(config_class.preset_config(args.preset), args.set or [])
+    if args.recipe and args.resume:
+        raise ConfigError("--recipe configures a new run; --resume continues a run with its own config.json")
+    recipe = read_recipe(Path(args.recipe)) if args.recipe else []
+    cfg = apply_overrides(config_class.preset_config(args.preset), [*recipe, *(args.set or [])])
     name = args.name or (args.preset if args.task == "push" else f"{args.task}_{args.preset}")
     extend_to = None
     if args.resume and args.set:  # a resumed run keeps its config.json; only its length may change
@@ -70,10 +73,11 @@ def _train(args: argparse.Namespace) -> int:
 def _imitate(args: argparse.Namespace) -> int:
     from dynpush.policies.imitation import ImitationConfig, imitate
     from dynpush.policies.train import TrainConfig
-    from dynpush.policies.training import apply_overrides
+    from dynpush.policies.training import apply_overrides, read_recipe
 
     argv = args.argv[args.argv.index("imitate") + 1 :]
-    cfg = apply_overrides(TrainConfig.preset_config(args.preset), args.set or [])
+    recipe = read_recipe(Path(args.recipe)) if args.recipe else []
+    cfg = apply_overrides(TrainConfig.preset_config(args.preset), [*recipe, *(args.set or [])])
     given = {"rounds": args.rounds, "steps_per_round": args.steps_per_round, "expert_object_size": args.expert_object_size,
              "expert_overrides": tuple(args.expert_set) if args.expert_set else None}
     imitation = ImitationConfig(**{name: value for name, value in given.items() if value is not None})
@@ -104,6 +108,8 @@ def build_parser() -> argparse.ArgumentParser:
                         " needs critic_warmup_iterations > 0); optimizer, CaT state and iteration count start fresh")
     p.add_argument("--procs", type=int, default=1,
                    help="processes on this machine (torchrun, gloo on CPU / NCCL on GPUs); env.num_envs is split")
+    p.add_argument("--recipe", default=None, metavar="FILE",
+                   help="a file of field=value overrides, one per line (configs/recipes/); --set applies after it")
     p.add_argument("--set", nargs="*", metavar="FIELD=VALUE", help="override config fields, e.g. env.num_envs=256 iterations=100")
     p.add_argument("--hours", type=float, default=None, metavar="H",
                    help="stop at the last iteration boundary before H hours of this launch, with a checkpoint that"
@@ -127,6 +133,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the expert's other gains (ScriptedPusherConfig fields, e.g. push_speed=1.0; after"
                         " --expert-object-size); kept on --resume; the fine-tuning's imitation term takes its own:"
                         " --set \"expert_overrides=('push_speed=1.0',)\"")
+    p.add_argument("--recipe", default=None, metavar="FILE", help="a file of field=value overrides, as for train")
     p.add_argument("--set", nargs="*", metavar="FIELD=VALUE", help="override training config fields, as for train")
     p.set_defaults(func=_imitate)
 

@@ -143,6 +143,30 @@ def config_from_dict(cls: type[T], data: dict) -> T:
     return cls(**kwargs)
 
 
+def read_recipe(path: Path) -> list[str]:
+    """The ``field.path=value`` overrides of a recipe file (``dynpush train --recipe``), in file order.
+
+    One override per line, written as on the command line but without shell quoting; blank lines and lines that start
+    with ``#`` are skipped. A missing file is a MissingFileError, a line without ``=`` a ConfigError naming the file
+    and the line.
+    """
+    try:
+        text = Path(path).read_text()
+    except FileNotFoundError:
+        raise MissingFileError(f"recipe {path} not found") from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise ConfigError(f"recipe {path} is not readable text: {error}") from error
+    overrides = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        if "=" not in line:
+            raise ConfigError(f"recipe {path}, line {number}: expected field.path=value, got {line!r}")
+        overrides.append(line)
+    return overrides
+
+
 def apply_overrides(cfg: T, overrides: list[str]) -> T:
     """Applies ``dotted.field=value`` overrides to a config dataclass (values parsed as Python literals, else strings)."""
     for item in overrides:

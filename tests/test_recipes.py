@@ -1,0 +1,69 @@
+"""Recipe files (``dynpush train --recipe``): overrides one per line, the shipped recipes equal to the commands that
+trained the shipped policy, and one-line errors for a missing or malformed file."""
+
+import json
+import shlex
+from pathlib import Path
+
+import pytest
+
+from dynpush.cli import main
+from dynpush.policies.train import TrainConfig
+from dynpush.policies.training import apply_overrides, read_recipe
+from dynpush.sim.config import ConfigError
+
+ROOT = Path(__file__).resolve().parent.parent
+RECIPES = ROOT / "configs" / "recipes"
+
+
+def config_of(overrides: list[str]) -> dict:
+    return json.loads(json.dumps(apply_overrides(TrainConfig.preset_config("cpu"), overrides).to_dict()))
+
+
+def test_a_recipe_is_its_lines_without_comments_in_order(tmp_path):
+    recipe = tmp_path / "r.txt"
+    recipe.write_text("# a comment\n\nppo.learning_rate=3e-4\n  iterations=10  \n# p_max_overrides={}\n"
+                      "p_max_overrides={'collision': (0.1, 1.0)}\n")
+    assert read_recipe(recipe) == ["ppo.learning_rate=3e-4", "iterations=10", "p_max_overrides={'collision': (0.1, 1.0)}"]
+
+
+def test_a_malformed_line_names_the_file_and_the_line(tmp_path):
+    recipe = tmp_path / "r.txt"
+    recipe.write_text("iterations=10\nppo.learning_rate 3e-4\n")
+    with pytest.raises(ConfigError, match=r"r\.txt, line 2: expected field\.path=value, got 'ppo\.learning_rate 3e-4'"):
+        read_recipe(recipe)
+
+
+@pytest.mark.parametrize("recipe, command", [("shipped_imitation.txt", 0), ("shipped_finetune.txt", 1)])
+def test_the_shipped_recipes_are_the_shipped_commands(recipe, command):
+    argv = shlex.split(json.loads((ROOT / "dynpush" / "shipped" / "training.json").read_text())["commands"][command])
+    recorded = argv[argv.index("--set") + 1 :]
+    assert config_of(read_recipe(RECIPES / recipe)) == config_of(recorded)
+
+
+def test_the_long_run_recipe_is_the_long_runs_config():
+    recorded = json.loads((ROOT / "campaigns" / "long1" / "config.json").read_text())
+    from_recipe = config_of(read_recipe(RECIPES / "long_run.txt"))
+    recorded["network"]["hold_actor_normalizer"] = from_recipe["network"]["hold_actor_normalizer"]  # set at creation
+    assert from_recipe == recorded
+
+
+def test_set_applies_after_the_recipe(tmp_path, monkeypatch):
+    recipe = tmp_path / "r.txt"
+    recipe.write_text("iterations=10\nenv.num_envs=8\n")
+    seen = {}
+    monkeypatch.setattr("dynpush.policies.training.train", lambda cfg, run_dir, **kw: seen.update(cfg=cfg, run_dir=run_dir))
+    assert main(["train", "--name", "r", "--runs", str(tmp_path), "--recipe", str(recipe), "--set", "iterations=3"]) == 0
+    assert (seen["cfg"].iterations, seen["cfg"].env.num_envs) == (3, 8)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--recipe", "missing.txt"], "recipe missing.txt not found"),
+    (["--recipe", "missing.txt", "--resume"], "--recipe configures a new run"),
+])
+def test_recipe_errors_are_one_line(tmp_path, capsys, monkeypatch, argv, message):
+    monkeypatch.chdir(tmp_path)
+    assert main(["train", "--name", "r", "--runs", str(tmp_path), *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("dynpush: ") and err.count("\n") == 1 and message in err, err
+    assert not (tmp_path / "r").exists()

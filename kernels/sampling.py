@@ -4,7 +4,8 @@ Every world flagged in ``reset`` draws a new episode: object shape, dimensions, 
 friction; object at the origin with a random yaw; goal uniform (by area) in the annulus (disc)
 ``goal_radius`` with a random yaw; robot base uniform (by area) in the annulus ``robot_radius`` with a
 random yaw at nominal height (polar angles within the ``*_bearing`` ranges); arm
-joints uniform around the default; reach target uniform on the object's vertical surfaces.
+joints uniform around the default; reach target uniform on the object's vertical surfaces. Training
+curricula may ask for less of the goal's yaw change or draw a share of the goals near the object's start.
 """
 
 import warp as wp
@@ -122,8 +123,11 @@ def sample_episodes(
     seed: int,
     params: SamplingParams,
     goal_difficulty: wp.array(dtype=float),
+    near_goal: wp.array(dtype=wp.vec3),
     task: PushTask,
     spec: EpisodeSpec,
+    near_goal_start: wp.array(dtype=int),
+    near_goal_ended: wp.array(dtype=int),
 ):
     """Draws the episode of every world with ``reset[w] != 0`` into ``spec`` (paper III-B, III-E).
 
@@ -131,6 +135,12 @@ def sample_episodes(
     reorientation the goal asks for: goal yaw ``yaw_object + d * wrap(yaw_goal - yaw_object)``; the
     goal position is always the drawn one (a position scaled toward the start would make waiting
     next to the object a success). At 1 the goal is exactly the drawn one.
+
+    ``near_goal[0]`` = (share, radius [m], max_yaw [rad]) (a training-only start-state curriculum; share 0 is the
+    paper's task): with probability ``share`` a world's goal is instead drawn near the object's start, uniform (by
+    area) in the disc ``radius`` around the env origin, with yaw ``yaw_object + U(-max_yaw, max_yaw)``.
+    ``near_goal_start[w]`` is 1 for such an episode, 0 otherwise; ``near_goal_ended[w]`` receives the flag of the
+    episode this reset ends (the statistics of ended episodes are read after their world was reset).
     """
     w = wp.tid()
     if reset[w] == 0:
@@ -169,6 +179,14 @@ def sample_episodes(
         spec.arm_q[w, j] = task.arm_default[j] + wp.randf(rng, -params.arm_joint_noise, params.arm_joint_noise)
     spec.base_mass_offset[w] = uniform(wp.randf(rng), params.base_mass_offset)
     spec.first_push_step[w] = int(uniform(wp.randf(rng), params.push_interval_steps))
+    # Drawn last, so that every draw above is the paper's whatever the share (share 0: today's episodes exactly).
+    near = near_goal[0]
+    near_goal_ended[w] = near_goal_start[w]
+    near_goal_start[w] = 0
+    if wp.randf(rng) < near[0]:
+        yaw_range = wp.vec2(object_yaw - near[2], object_yaw + near[2])
+        spec.goal[w] = polar_pose(fork_rng(wp.randi(rng)), wp.vec2(0.0, near[1]), wp.vec2(-wp.pi, wp.pi), yaw_range)
+        near_goal_start[w] = 1
 
 
 @wp.func

@@ -25,7 +25,7 @@ from rsl_rl.runners import OnPolicyRunner
 
 from dynpush.policies.cat_ppo import CaTPPO
 from dynpush.policies.checkpoint_file import CheckpointError, read_checkpoint
-from dynpush.policies.curriculum import GoalCurriculumConfig
+from dynpush.policies.curriculum import GoalCurriculumConfig, NearGoalStartConfig
 from dynpush.policies.progress import ProgressLogger
 from dynpush.policies.expert_regularization import ExpertImitationLoss
 from dynpush.policies.run_folder import save_checkpoint
@@ -91,6 +91,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             raise TypeError(f"CaTOnPolicyRunner needs a CaTPPO algorithm, got {type(self.alg).__name__}.")
         self.schedule_cfg = ScheduleConfig.from_dict(train_cfg.get("schedule", {}))
         self.curriculum = GoalCurriculumConfig(**train_cfg.get("curriculum", {}))
+        self.near_goal_starts = NearGoalStartConfig(**train_cfg.get("near_goal_starts", {}))
         self.critic_warmup_iterations = train_cfg.get("critic_warmup_iterations", 0)
         self.critic_warmup_learning_rate = train_cfg.get("critic_warmup_learning_rate")
         self.learning_rate = self.alg.learning_rate  # the configured one, restored after the warm-up
@@ -129,6 +130,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             iteration_start = time.time()
             if self.curriculum.enabled:
                 self.apply_curriculum(fresh_run=it == 0)
+            if self.near_goal_starts.share > 0:
+                self.apply_near_goal_starts()
             self._snapshot = {"iteration": it, **copy.deepcopy(self.training_state(next_iteration=it))}
             if evaluating:  # after the snapshot: an interrupted evaluation loses no iteration
                 seconds = self.evaluate(it)
@@ -203,6 +206,13 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             self.env.goal_difficulty_value, success_rate)
         self.env.set_goal_difficulty(difficulty)
         self.logger.run_state["/curriculum/goal_difficulty"] = difficulty
+
+    def apply_near_goal_starts(self) -> None:
+        """Sets the training environment's near-goal starts (every iteration: a resumed run's environment starts with
+        none) and logs their share."""
+        cfg = self.near_goal_starts
+        self.env.set_near_goal_starts(cfg.share, cfg.goal_radius, cfg.max_yaw)
+        self.logger.run_state["/curriculum/near_goal_share"] = cfg.share
 
     def training_state(self, next_iteration: int) -> dict:
         """What a checkpoint holds: the algorithm's state, the iteration a resumed run starts at, the environment's

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from dynpush.kernels.constraints import CONSTRAINT_GROUPS
 from dynpush.sim.config import ConfigError, PushEnvConfig
 
-from .curriculum import GoalCurriculumConfig
+from .curriculum import GoalCurriculumConfig, NearGoalStartConfig
 from .expert_regularization import ExpertLabelledEnv
 from .schedules import ConstraintCurriculumConfig
 from .scripted import ScriptedPusherConfig, check_object_size
@@ -51,6 +51,9 @@ class TrainConfig:
     # group -> (initial, final), ramped like the others; e.g. {'collision': (0.1, 1.0)}.
     p_max_overrides: dict[str, tuple[float, float]] = field(default_factory=dict)
     curriculum: GoalCurriculumConfig = field(default_factory=GoalCurriculumConfig)
+    # Training resets that start near the goal with the yaw off (ours, policies/curriculum.py); evaluation never
+    # uses them: the evaluation environment is built from ``env`` alone (policies/trained_env.py).
+    near_goal_starts: NearGoalStartConfig = field(default_factory=NearGoalStartConfig)
     # Iterations at the start of the run in which only the critic learns and the actor is held (ours): for
     # runs that start from a ``dynpush imitate`` checkpoint, whose critic has not learnt the returns yet.
     critic_warmup_iterations: int = 0
@@ -96,6 +99,7 @@ class TrainConfig:
     def validate(self) -> TrainConfig:
         self.env.validate()
         self.curriculum.validate()
+        self.near_goal_starts.validate()
         if self.env.legged.enabled and not self.env.legged.locomotion_policy:
             raise ConfigError("env.legged.locomotion_policy must name a locomotion.onnx to train in legged mode"
                               " (without one the legs hold their default targets)")
@@ -152,6 +156,7 @@ class TrainConfig:
                                           **{name: (0.0, 0.0) for name in self.disabled_constraint_groups}}},
             },
             "curriculum": dataclasses.asdict(self.curriculum),
+            "near_goal_starts": dataclasses.asdict(self.near_goal_starts),
             "critic_warmup_iterations": self.critic_warmup_iterations,
             "critic_warmup_learning_rate": self.critic_warmup_learning_rate,
             "imitation_weight": tuple(self.imitation_weight),

@@ -150,6 +150,12 @@ class PushEnv(EnvBase, VecEnv):
         self.constraints = zeros((n, constraints_k.NUM_CONSTRAINTS))
         self.variant = zeros(n, int)
         self.goal_difficulty = wp.ones(1, dtype=float)  # 1: the paper's goal distribution
+        # (share, radius [m], max_yaw [rad]) of near-goal starts, a training-only curriculum; share 0: the paper's
+        # goal distribution, so evaluation and export, which never set it, use that.
+        self.near_goal = zeros(1, wp.vec3)
+        self.near_goal_start = zeros(n, int)  # 1: the world's episode started near its goal
+        self.near_goal_ended = zeros(n, int)  # near_goal_start of the episode the world's last reset ended
+        self._near_goal_share = 0.0  # the host's copy: episode statistics are split only while it is > 0
         self._episodes_ended = 0
         self._episodes_succeeded = 0
         spec = sampling.EpisodeSpec()
@@ -185,6 +191,7 @@ class PushEnv(EnvBase, VecEnv):
         self.episode_success_t = t(self.episode_success)
         self.episode_toppled_t = t(self.episode_toppled)
         self.success_t = t(self.success)
+        self.near_goal_ended_t = t(self.near_goal_ended)
         self.episode_length_buf = t(task.episode_step)
         # Per-episode constraint statistics (torch glue): steps with any column of a group violated.
         self._constraint_stats = ConstraintEpisodeStats(CONSTRAINT_GROUPS, n, self.constraints_t.device)
@@ -378,7 +385,8 @@ class PushEnv(EnvBase, VecEnv):
     def _reset_flagged(self) -> None:
         """Draws and starts new episodes for worlds with ``reset_flags != 0`` (inside the captured step)."""
         self._launch(sampling.sample_episodes, [self.reset_flags, self.cfg.seed, self.sampling_params, self.goal_difficulty,
-                                                self.task, self.spec])
+                                                self.near_goal, self.task, self.spec, self.near_goal_start,
+                                                self.near_goal_ended])
         self._start_flagged()
 
     def _start_flagged(self) -> None:
@@ -536,6 +544,16 @@ class PushEnv(EnvBase, VecEnv):
     def goal_difficulty_value(self) -> float:
         return float(self.goal_difficulty.numpy()[0])
 
+    def set_near_goal_starts(self, share: float, radius: float, max_yaw: float) -> None:
+        """Episodes drawn from now on start near their goal with probability ``share``: the goal uniform (by area)
+        within ``radius`` [m] of the object's start, its yaw the object's plus U(-``max_yaw``, ``max_yaw``) [rad]
+        (a training-only start-state curriculum; ``kernels/sampling.py``). Share 0 is the paper's task."""
+        if not (0.0 <= share <= 1.0 and radius >= 0.0 and max_yaw >= 0.0):
+            raise ConfigError(f"near-goal starts need share in [0, 1], radius >= 0, max_yaw >= 0; got {share!r},"
+                              f" {radius!r}, {max_yaw!r}")
+        self.near_goal.fill_(wp.vec3(share, radius, max_yaw))
+        self._near_goal_share = share
+
     def take_success_rate(self) -> float | None:
         """Success rate of the episodes that ended since the last call (None if none ended)."""
         ended, succeeded = self._episodes_ended, self._episodes_succeeded
@@ -559,6 +577,17 @@ class PushEnv(EnvBase, VecEnv):
             self._episodes_succeeded += int(succeeded.sum())
             log["/episode/success"] = succeeded
             log["/episode/toppled"] = self.episode_toppled_t[ended].float()
+            log.update(self._near_goal_log(ended))
         for i, name in enumerate(REWARD_TERMS):
             log[f"/reward/{name}"] = float(self.reward_terms_t[:, i].mean())
         return log
+
+    def _near_goal_log(self, ended: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Success of the ended episodes that started near their goal and of the others while near-goal starts are on
+        (a plain run logs what it always did); each key only when such episodes ended."""
+        if self._near_goal_share == 0.0:
+            return {}
+        near = self.near_goal_ended_t[ended] == 1
+        succeeded = (self.episode_success_t[ended] == 1).float()
+        split = {"/episode/near_goal/success": succeeded[near], "/episode/other/success": succeeded[~near]}
+        return {key: value for key, value in split.items() if value.numel()}

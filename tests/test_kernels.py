@@ -427,6 +427,17 @@ def random_spec(rng, n):
     ))
 
 
+def sample_episodes(reset, seed, params, task, spec, difficulty=1.0, near_goal=(0.0, 0.0, 0.0), start_flags=None):
+    """Launches ``sampling.sample_episodes``; ``near_goal`` = (share, radius [m], max_yaw [rad]), ``start_flags`` the
+    worlds' near-goal flags before (default 0). Returns the near-goal flags (start, ended) after."""
+    n = len(reset)
+    start = arr(np.zeros(n) if start_flags is None else start_flags, int)
+    ended = arr(np.full(n, -1), int)
+    launch(sampling.sample_episodes, n, arr(reset, int), seed, params, arr([difficulty]),
+           wp.array([near_goal], dtype=wp.vec3, device=DEVICE), task, spec, start, ended)
+    return start.numpy(), ended.numpy()
+
+
 def test_sample_episodes_narrow_ranges():
     """Reduced tasks and curricula: bearings, yaws and the goal annulus follow their ranges."""
     n = 4000
@@ -434,7 +445,7 @@ def test_sample_episodes_narrow_ranges():
     task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(4), n))
     params = sampling_params(robot_bearing=(2.0, 2.5), goal_bearing=(-0.3, 0.1), goal_radius=(0.5, 0.8),
                              object_yaw=(0.2, 0.2), goal_yaw=(-1.0, -0.5), base_yaw=(3.0, 3.1))
-    launch(sampling.sample_episodes, n, arr(np.ones(n, np.int32), int), 5, params, arr([1.0]), task, spec)
+    sample_episodes(np.ones(n), 5, params, task, spec)
     out = read_struct(sampling.EpisodeSpec, spec)
     goal, base = out["goal"], out["base"]
     bearing = lambda xy: np.arctan2(xy[:, 1], xy[:, 0])  # noqa: E731
@@ -460,7 +471,7 @@ def test_goal_difficulty_scales_the_goal_yaw_change():
     for d in (1.0, 0.4, 0.0):
         _, task_np = random_state(np.random.default_rng(3), n)  # identical random streams for every d
         task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(4), n))
-        launch(sampling.sample_episodes, n, arr(np.ones(n, np.int32), int), 9, sampling_params(), arr([d]), task, spec)
+        sample_episodes(np.ones(n), 9, sampling_params(), task, spec, difficulty=d)
         out = read_struct(sampling.EpisodeSpec, spec)
         goals[d] = out["goal"]
         object_yaw = out["object_yaw"]
@@ -479,8 +490,7 @@ def test_sample_episodes_draws_are_independent():
     n = 8000
     _, task_np = random_state(np.random.default_rng(5), n)
     task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(6), n))
-    launch(sampling.sample_episodes, n, arr(np.ones(n, np.int32), int), 13, sampling_params(cylinder_probability=0.0),
-           arr([1.0]), task, spec)
+    sample_episodes(np.ones(n), 13, sampling_params(cylinder_probability=0.0), task, spec)
     out = read_struct(sampling.EpisodeSpec, spec)
     goal, base, d = out["goal"], out["base"], out["dims"]
     draws = {
@@ -505,7 +515,7 @@ def test_sample_episodes():
     _, task_np = random_state(rng, n)
     before = random_spec(rng, n)
     task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **before)
-    launch(sampling.sample_episodes, n, arr(reset, int), 11, sampling_params(), arr([1.0]), task, spec)
+    sample_episodes(reset, 11, sampling_params(), task, spec)
     out = read_struct(sampling.EpisodeSpec, spec)
 
     # Worlds that do not reset keep their episode; every reset world draws from a fresh stream.
@@ -564,8 +574,67 @@ def test_sample_episodes():
 
     # Ablation (Table I): the reach target at the centroid.
     spec = make_struct(sampling.EpisodeSpec, **random_spec(rng, 64))
-    launch(sampling.sample_episodes, 64, arr(np.ones(64), int), 3, sampling_params(surface_target=0), arr([1.0]), task, spec)
+    sample_episodes(np.ones(64), 3, sampling_params(surface_target=0), task, spec)
     np.testing.assert_array_equal(spec.reach_target_o.numpy(), 0.0)
+
+
+def near_goal_episodes(n, seed, share, radius=0.1, max_yaw=0.6, reset=None):
+    """``n`` worlds' episodes drawn from the same random state (seeds 31, 32) with near-goal starts (``share``,
+    ``radius`` [m], ``max_yaw`` [rad]), every world flagged near before: (spec fields, start flags, ended flags)."""
+    _, task_np = random_state(np.random.default_rng(31), n)
+    task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(32), n))
+    start, ended = sample_episodes(np.ones(n) if reset is None else reset, seed, sampling_params(), task, spec,
+                                   near_goal=(share, radius, max_yaw), start_flags=np.ones(n))
+    return read_struct(sampling.EpisodeSpec, spec), start, ended
+
+
+def test_near_goal_share_zero_draws_todays_episodes():
+    """Near-goal starts off: the episodes are the ones the sampler drew before the feature (values recorded from that
+    kernel at this seed and state), and no world is flagged near."""
+    out, start, ended = near_goal_episodes(6, 17, share=0.0, radius=0.1, max_yaw=0.6)
+    close(out["goal"], [[-0.10308, -1.741165, 2.334892], [0.830037, -1.325282, -2.354484], [0.535396, 0.827074, -0.450989],
+                        [-0.950761, 0.050223, 2.836998], [0.27713, -0.409834, -0.320092], [0.140153, -0.136377, 0.263292]],
+          rtol=0, atol=2e-6)
+    close(out["base"][:, 2], [1.590024, 1.800324, 0.111826, -2.544515, -1.575447, -2.496414], rtol=0, atol=2e-6)
+    close(out["object_yaw"], [-3.131667, -1.368702, -0.795697, -1.838049, -2.489117, 2.933154], rtol=0, atol=2e-6)
+    close(out["mass"], [7.33513, 7.045708, 9.254725, 2.371342, 3.787742, 2.267406], rtol=0, atol=2e-6)
+    np.testing.assert_array_equal(out["first_push_step"], [383, 357, 401, 381, 428, 425])
+    np.testing.assert_array_equal(start, 0)
+    np.testing.assert_array_equal(ended, 1, err_msg="the ended episodes' flags are handed on")
+
+
+def test_near_goal_share_one_puts_every_goal_near():
+    """Share 1: every goal uniform (by area) in the disc ``radius`` around the object's start, its yaw the object's
+    plus U(-max_yaw, max_yaw) (numpy reference of the distribution); every other draw is the plain sampler's."""
+    n, radius, max_yaw = 8000, 0.1, 0.6
+    plain, _, _ = near_goal_episodes(n, 23, share=0.0)
+    out, start, _ = near_goal_episodes(n, 23, share=1.0, radius=radius, max_yaw=max_yaw)
+    np.testing.assert_array_equal(start, 1)
+    goal = out["goal"]
+    r2 = np.sum(goal[:, :2] ** 2, axis=1)
+    assert r2.max() <= radius**2 * (1 + 1e-5)
+    assert_uniform(r2 / radius**2, "near goal r^2")
+    assert_uniform((np.arctan2(goal[:, 1], goal[:, 0]) + np.pi) / (2 * np.pi), "near goal bearing")
+    offset = goal[:, 2] - out["object_yaw"]
+    assert np.abs(offset).max() <= max_yaw + 1e-5
+    assert_uniform((offset + max_yaw) / (2 * max_yaw), "near goal yaw offset")
+    for name, value in plain.items():
+        if name != "goal":
+            np.testing.assert_array_equal(out[name], value, err_msg=f"{name} differs from the plain sampler's")
+
+
+def test_near_goal_share_half_and_worlds_that_do_not_reset():
+    """Share 0.5: about half the reset worlds start near (4 sigma); a world that does not reset keeps its flags."""
+    n = 8000
+    reset = (np.random.default_rng(33).uniform(size=n) < 0.8).astype(np.int32)
+    r = reset == 1
+    out, start, ended = near_goal_episodes(n, 29, share=0.5, reset=reset)
+    near = start[r] == 1
+    assert abs(near.mean() - 0.5) < 4 * math.sqrt(0.25 / r.sum()), f"near-goal share {near.mean()}"
+    assert (np.sum(out["goal"][r][near, :2] ** 2, axis=1) <= 0.1**2 * (1 + 1e-5)).all()
+    assert np.sum(out["goal"][r][~near, :2] ** 2, axis=1).max() > 1.0, "the others keep the paper's 2 m disc"
+    np.testing.assert_array_equal(start[~r], 1)
+    np.testing.assert_array_equal(ended, np.where(r, 1, -1))
 
 
 def test_start_episodes():

@@ -116,6 +116,56 @@ def test_curriculum_run_starts_easy_and_eval_envs_stay_at_the_papers_task(tmp_pa
     assert PushEnv(PushEnvConfig(num_envs=1)).goal_difficulty_value == 1.0
 
 
+def test_near_goal_start_config_is_checked():
+    from dynpush.policies.curriculum import NearGoalStartConfig
+
+    NearGoalStartConfig(share=1.0, goal_radius=2.0, max_yaw=np.pi).validate()
+    for field, value, message in (("share", 1.5, r"near_goal_starts.share must lie in \[0, 1\], got 1.5"),
+                                  ("goal_radius", -0.1, r"near_goal_starts.goal_radius must lie in \[0, 2\]"),
+                                  ("max_yaw", 4.0, r"near_goal_starts.max_yaw must lie in \[0, 3.14159\]")):
+        with pytest.raises(ConfigError, match=message):
+            apply_overrides(tiny(2), [f"near_goal_starts.{field}={value}"]).validate()
+
+
+def test_near_goal_run_starts_near_and_eval_envs_never_do(tmp_path):
+    """A 2-iteration run with every training reset near the goal: the share is logged per iteration and the episodes
+    drawn after the first rollout start are near; a fresh environment (evaluation, export: built from ``env`` alone)
+    has share 0."""
+    from dynpush.sim.config import PushEnvConfig
+    from dynpush.sim.push_env import PushEnv
+
+    cfg = apply_overrides(tiny(2), ["near_goal_starts.share=1.0", "near_goal_starts.goal_radius=0.05",
+                                    "near_goal_starts.max_yaw=0.3"])
+    runner = train(cfg, tmp_path / "run")
+    env = runner.env
+    np.testing.assert_allclose(env.near_goal.numpy()[0], (1.0, 0.05, 0.3), rtol=1e-6)
+    rows = [json.loads(line) for line in (tmp_path / "run" / "progress.jsonl").read_text().splitlines()]
+    assert [row["/curriculum/near_goal_share"] for row in rows] == [1.0, 1.0]
+    env.reset()
+    goal, object_yaw = env.spec.goal.numpy(), env.spec.object_yaw.numpy()
+    assert (np.linalg.norm(goal[:, :2], axis=1) <= 0.05 + 1e-6).all()
+    assert (np.abs(goal[:, 2] - object_yaw) <= 0.3 + 1e-6).all()
+    np.testing.assert_array_equal(env.near_goal_start.numpy(), 1)
+    np.testing.assert_array_equal(PushEnv(PushEnvConfig(num_envs=1)).near_goal.numpy(), 0.0)
+
+
+def test_episode_success_is_split_by_near_goal_starts():
+    from dynpush.sim.config import PushEnvConfig
+    from dynpush.sim.push_env import PushEnv
+
+    env = PushEnv(PushEnvConfig(num_envs=4))
+    env.episode_success_t[:] = torch.tensor([1, 0, 1, -1], dtype=env.episode_success_t.dtype)
+    env.near_goal_ended_t[:] = torch.tensor([1, 1, 0, 1], dtype=env.near_goal_ended_t.dtype)
+    ended = env.episode_success_t >= 0
+    assert env._near_goal_log(ended) == {}, "a plain run logs no split"
+    env.set_near_goal_starts(0.5, 0.1, 0.6)
+    log = env._near_goal_log(ended)
+    assert log["/episode/near_goal/success"].tolist() == [1.0, 0.0]
+    assert log["/episode/other/success"].tolist() == [1.0]
+    with pytest.raises(ConfigError, match="near-goal starts need share in"):
+        env.set_near_goal_starts(1.5, 0.1, 0.6)
+
+
 def test_learning_curve_counts_pauses_between_sittings_as_the_iteration_only(tmp_path):
     from dynpush.cli import main
     from dynpush.policies.progress import read_progress, wall_clock_hours

@@ -9,7 +9,7 @@ tens of updates (docs/ppo_fine_tuning.md has the measured runs and what each cha
 
 Prints one JSON object: the start's success, and per evaluated checkpoint its actor updates, world-steps and
 deterministic success and toppled rates. Exits 1 when a checkpoint falls below the start by more than ``--tolerance``
-percentage points.
+percentage points, 2 on a bad input (one line).
 
     python benchmarks/finetune_near_goal.py [--iterations 101] [--checkpoints 50 100] [--episodes 256]
         [--out runs/finetune_near_goal] [--set network.init_noise_std=0.1 ppo.learning_rate=1.5e-5 ...]
@@ -58,32 +58,41 @@ def main() -> int:
             parser.error(f"--checkpoints: {k} is neither a multiple of --save-interval {args.save_interval} nor the"
                          f" last iteration, in [1, {args.iterations - 1}]")
 
+    from dynpush.errors import UserError
     from dynpush.policies.evaluate import EvalConfig, evaluate
     from dynpush.policies.export import export_policy
+    from dynpush.policies.run_folder import check_new_run
     from dynpush.policies.train import TrainConfig, apply_overrides, train
     from dynpush.shipped import shipped_file
 
-    init_from = Path(args.init_from) if args.init_from else shipped_file("policy.onnx")
     overrides = [*FINE_TUNE, *NEAR_GOAL, f"iterations={args.iterations}", f"save_interval={args.save_interval}",
                  *args.set]
-    cfg = apply_overrides(TrainConfig.preset_config("cpu"), overrides)
     run_dir = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="finetune_near_goal_")) / "run"
+    try:  # every input checked before the first evaluation
+        init_from = Path(args.init_from) if args.init_from else shipped_file("policy.onnx")
+        if not init_from.is_file():
+            raise FileNotFoundError(f"--init-from {init_from} not found")
+        cfg = apply_overrides(TrainConfig.preset_config("cpu"), overrides).validate()
+        check_new_run(run_dir)
+    except (UserError, FileNotFoundError) as error:
+        print(f"finetune_near_goal: {error}", file=sys.stderr)
+        return 2
     eval_cfg = EvalConfig(episodes=args.episodes, seed=args.seed, overrides=NEAR_GOAL)
 
     def rates(policy: Path, out: Path) -> dict:
         summary = evaluate(policy, eval_cfg, out)
         return {"success": summary["success_rate"], "toppled": summary["toppled_rate"]}
 
-    start = rates(init_from, run_dir.parent / "eval_start")
+    start = rates(init_from, run_dir / "eval_start")
     train(cfg, run_dir, command=" ".join(sys.argv), init_from=init_from)
     steps_per_iteration = cfg.env.num_envs * cfg.num_steps_per_env
     checkpoints = []
     for k in args.checkpoints:
         policy = export_policy(run_dir, checkpoint=f"model_{k}.pt", out=run_dir / f"eval_{k}" / "policy.onnx")
         checkpoints.append({"iteration": k, "actor_updates": max(0, k + 1 - cfg.critic_warmup_iterations),
-                            "world_steps": k * steps_per_iteration, **rates(policy, run_dir / f"eval_{k}")})
+                            "world_steps": (k + 1) * steps_per_iteration, **rates(policy, run_dir / f"eval_{k}")})
     worst = min(c["success"] for c in checkpoints)
-    print(json.dumps({"overrides": overrides, "start": start, "checkpoints": checkpoints,
+    print(json.dumps({"run_dir": str(run_dir), "overrides": overrides, "start": start, "checkpoints": checkpoints,
                       "kept_start": worst >= start["success"] - args.tolerance}, indent=2))
     return 0 if worst >= start["success"] - args.tolerance else 1
 

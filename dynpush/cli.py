@@ -36,7 +36,7 @@ def _env_info(args: argparse.Namespace) -> int:
 def _train(args: argparse.Namespace) -> int:
     from dynpush.policies.locomotion_train import LocomotionTrainConfig
     from dynpush.policies.train import TrainConfig
-    from dynpush.policies.training import apply_overrides, launch_processes, read_recipe, run_config, train
+    from dynpush.policies.training import apply_recipe, launch_processes, run_config, train
     from dynpush.sim.config import ConfigError
 
     started = args.launched_at or time.time()  # --hours counts from the user's launch
@@ -45,8 +45,8 @@ def _train(args: argparse.Namespace) -> int:
     config_class = {"push": TrainConfig, "locomotion": LocomotionTrainConfig}[args.task]
     if args.recipe and args.resume:
         raise ConfigError("--recipe configures a new run; --resume continues a run with its own config.json")
-    recipe = read_recipe(Path(args.recipe)) if args.recipe else []
-    cfg = apply_overrides(config_class.preset_config(args.preset), [*recipe, *(args.set or [])])
+    cfg = apply_recipe(config_class.preset_config(args.preset), Path(args.recipe) if args.recipe else None,
+                       args.set or [])
     name = args.name or (args.preset if args.task == "push" else f"{args.task}_{args.preset}")
     extend_to = None
     if args.resume and args.set:  # a resumed run keeps its config.json; only its length may change
@@ -73,11 +73,13 @@ def _train(args: argparse.Namespace) -> int:
 def _imitate(args: argparse.Namespace) -> int:
     from dynpush.policies.imitation import ImitationConfig, imitate
     from dynpush.policies.train import TrainConfig
-    from dynpush.policies.training import apply_overrides, read_recipe
+    from dynpush.policies.training import apply_recipe
+    from dynpush.sim.config import ConfigError
 
+    if args.recipe and args.resume:
+        raise ConfigError("--recipe configures a new run; --resume continues a run with its own config")
     argv = args.argv[args.argv.index("imitate") + 1 :]
-    recipe = read_recipe(Path(args.recipe)) if args.recipe else []
-    cfg = apply_overrides(TrainConfig.preset_config(args.preset), [*recipe, *(args.set or [])])
+    cfg = apply_recipe(TrainConfig.preset_config(args.preset), Path(args.recipe) if args.recipe else None, args.set or [])
     given = {"rounds": args.rounds, "steps_per_round": args.steps_per_round, "expert_object_size": args.expert_object_size,
              "expert_overrides": tuple(args.expert_set) if args.expert_set else None}
     imitation = ImitationConfig(**{name: value for name, value in given.items() if value is not None})

@@ -1,4 +1,4 @@
-"""Tracked-base locomotion model (DESIGN.md decision 2).
+"""Tracked-base locomotion model (docs/task.md, "Deviations from the paper").
 
 The base is a free rigid body. Once per substep a wrench drives it toward the commanded 6D base
 state ``(vx, vy, yaw rate, roll, pitch, height)`` after a first-order lag that stands for the

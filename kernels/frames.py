@@ -1,6 +1,6 @@
 """Frame helpers shared by the kernels (``wp.func`` only, no launches).
 
-Conventions (DESIGN.md): world Z-up, SI units, quaternions stored (x, y, z, w) as in Warp/Newton,
+Conventions (the whole project's): world Z-up, SI units, quaternions stored (x, y, z, w) as in Warp/Newton,
 rotation matrices act on column vectors (``p_world = R_wb @ p_b``).
 """
 

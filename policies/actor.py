@@ -70,7 +70,11 @@ def load_onnx_actor(actor: MLPModel, path: Path) -> None:
         raise ConfigError(f"{path} has {len(gemms)} layers, the run's actor {len(layers)}: set network.actor_hidden to the"
                          f" hidden sizes of the file ({[int(weights[g.input[2]].shape[0]) for g in gemms[:-1]]})")
     trained = policy.contract.training_config  # the config.json of the run that wrote the file
-    samples = trained["iterations"] * trained["env"]["num_envs"] * trained["num_steps_per_env"]
+    try:
+        samples = int(trained["iterations"]) * int(trained["env"]["num_envs"]) * int(trained["num_steps_per_env"])
+    except (KeyError, TypeError, ValueError) as error:
+        raise ConfigError(f"{path}: its training_config lacks the iterations, env.num_envs or num_steps_per_env that"
+                          f" count its normaliser's samples ({error!r})") from None
     with torch.no_grad():
         for index, (gemm, layer) in enumerate(zip(gemms, layers)):
             transposed = any(a.name == "transB" and a.i == 1 for a in gemm.attribute)

@@ -1,6 +1,6 @@
 """ONNX export of a trained push policy with its contract.
 
-``policy.onnx`` (DESIGN.md decision 4): input ``obs`` [1, 54] float32, the un-normalised actor
+``policy.onnx`` (the deployment contract, docs/runtime.md): input ``obs`` [1, 54] float32, the un-normalised actor
 observation (layout ``dynpush.runtime.observation.POLICY_OBSERVATION_LAYOUT``); output ``actions``
 [1, 11] float32, the deterministic mean of the policy *before* the environment's clip to
 ``+-action_clip``. The empirical observation normaliser is part of the graph. The graph is rsl_rl's own

@@ -155,16 +155,27 @@ def read_recipe(path: Path) -> list[str]:
     except FileNotFoundError:
         raise MissingFileError(f"recipe {path} not found") from None
     except (OSError, UnicodeDecodeError) as error:
-        raise ConfigError(f"recipe {path} is not readable text: {error}") from error
+        raise ConfigError(f"is not readable text: {error}") from error
     overrides = []
     for number, line in enumerate(text.splitlines(), start=1):
         line = line.strip()
         if not line or line.startswith("#"):
             continue
         if "=" not in line:
-            raise ConfigError(f"recipe {path}, line {number}: expected field.path=value, got {line!r}")
+            raise ConfigError(f"line {number}: expected field.path=value, got {line!r}")
         overrides.append(line)
     return overrides
+
+
+def apply_recipe(cfg: T, recipe: Path | None, overrides: list[str]) -> T:
+    """``cfg`` with the overrides of the recipe file ``recipe`` (if any), then ``overrides``; an invalid field of the
+    recipe is a ConfigError that names the file."""
+    if recipe is not None:
+        try:
+            cfg = apply_overrides(cfg, read_recipe(recipe))
+        except ConfigError as error:
+            raise ConfigError(f"recipe {recipe}: {error}") from None
+    return apply_overrides(cfg, overrides)
 
 
 def apply_overrides(cfg: T, overrides: list[str]) -> T:

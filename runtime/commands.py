@@ -137,7 +137,7 @@ period); "realtime_check" holds the measured rate."""
 
 
 def _realtime_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--on-slow", choices=("lockstep", "stop"), default="lockstep",
+    p.add_argument("--on-slow", choices=("lockstep", "stop"), default="lockstep",  # sim2sim.ON_SLOW (not imported: parsing stays light)
                    help="real time, the simulator falls behind the control rate: rerun in lock-step (default) or stop"
                         " with exit status 2 (see below)")
     p.add_argument("--min-rate", type=float, default=0.9, metavar="FRACTION",

@@ -143,7 +143,7 @@ class ActionConfig:
 
 @dataclass
 class BaseTrackingConfig:
-    """Tracked-base locomotion model (DESIGN.md decision 2; ours, the paper uses a learned policy).
+    """Tracked-base locomotion model (docs/task.md, "Deviations from the paper"; ours, the paper uses a learned policy).
 
     The commanded 6D base state passes a first-order lag of ``time_constant`` (the locomotion
     controller's bandwidth) and a PD wrench tracks it, saturated at force/torque limits, so that

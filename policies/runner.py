@@ -130,8 +130,6 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             iteration_start = time.time()
             if self.curriculum.enabled:
                 self.apply_curriculum(fresh_run=it == 0)
-            if self.near_goal_starts.share > 0:
-                self.apply_near_goal_starts()
             self._snapshot = {"iteration": it, **copy.deepcopy(self.training_state(next_iteration=it))}
             if evaluating:  # after the snapshot: an interrupted evaluation loses no iteration
                 seconds = self.evaluate(it)
@@ -147,6 +145,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
                                        else self.learning_rate)
 
         self.alg.on_rollout_start = on_rollout_start
+        if self.near_goal_starts.share > 0:
+            self.apply_near_goal_starts()
         try:
             super().learn(num_learning_iterations, init_at_random_ep_len)
         except TimeBudgetSpent:
@@ -208,8 +208,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self.logger.run_state["/curriculum/goal_difficulty"] = difficulty
 
     def apply_near_goal_starts(self) -> None:
-        """Sets the training environment's near-goal starts (every iteration: a resumed run's environment starts with
-        none) and logs their share."""
+        """Sets the training environment's near-goal starts (at every launch: a resumed run's environment starts with
+        none) and logs their share (the logger keeps it for every iteration)."""
         cfg = self.near_goal_starts
         self.env.set_near_goal_starts(cfg.share, cfg.goal_radius, cfg.max_yaw)
         self.logger.run_state["/curriculum/near_goal_share"] = cfg.share

@@ -577,17 +577,17 @@ class PushEnv(EnvBase, VecEnv):
             self._episodes_succeeded += int(succeeded.sum())
             log["/episode/success"] = succeeded
             log["/episode/toppled"] = self.episode_toppled_t[ended].float()
-            log.update(self._near_goal_log(ended))
+            log.update(self._near_goal_log(ended, succeeded))
         for i, name in enumerate(REWARD_TERMS):
             log[f"/reward/{name}"] = float(self.reward_terms_t[:, i].mean())
         return log
 
-    def _near_goal_log(self, ended: torch.Tensor) -> dict[str, torch.Tensor]:
-        """Success of the ended episodes that started near their goal and of the others while near-goal starts are on
-        (a plain run logs what it always did); each key only when such episodes ended."""
+    def _near_goal_log(self, ended: torch.Tensor, succeeded: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Success (``succeeded``, one per ``ended`` world) of the ended episodes that started near their goal and of
+        the others while near-goal starts are on (a plain run logs what it always did); each key only when such
+        episodes ended."""
         if self._near_goal_share == 0.0:
             return {}
         near = self.near_goal_ended_t[ended] == 1
-        succeeded = (self.episode_success_t[ended] == 1).float()
         split = {"/episode/near_goal/success": succeeded[near], "/episode/other/success": succeeded[~near]}
         return {key: value for key, value in split.items() if value.numel()}

@@ -157,9 +157,10 @@ def test_episode_success_is_split_by_near_goal_starts():
     env.episode_success_t[:] = torch.tensor([1, 0, 1, -1], dtype=env.episode_success_t.dtype)
     env.near_goal_ended_t[:] = torch.tensor([1, 1, 0, 1], dtype=env.near_goal_ended_t.dtype)
     ended = env.episode_success_t >= 0
-    assert env._near_goal_log(ended) == {}, "a plain run logs no split"
+    succeeded = (env.episode_success_t[ended] == 1).float()
+    assert env._near_goal_log(ended, succeeded) == {}, "a plain run logs no split"
     env.set_near_goal_starts(0.5, 0.1, 0.6)
-    log = env._near_goal_log(ended)
+    log = env._near_goal_log(ended, succeeded)
     assert log["/episode/near_goal/success"].tolist() == [1.0, 0.0]
     assert log["/episode/other/success"].tolist() == [1.0]
     with pytest.raises(ConfigError, match="near-goal starts need share in"):

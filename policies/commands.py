@@ -127,7 +127,8 @@ def _eval(args: argparse.Namespace) -> int:
         return _eval_locomotion(args)
     overrides = tuple(args.set or ())
     if args.scenario:
-        from .scenarios import load_scenario, run_scenario
+        from .scenario_schema import load_scenario
+        from .scenarios import run_scenario
 
         scenario = load_scenario(Path(args.scenario))
         out = Path(args.out) if args.out else policy.parent / f"scenario_{scenario.name}"

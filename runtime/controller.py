@@ -165,7 +165,8 @@ class Controller:
         if self.locomotion is not None and state in ACTIVE_STATES:
             leg_targets = self.locomotion.step(robot.state, base_command)
             self.layout.view(self.record, "locomotion_obs")[:] = self.locomotion.model.input[0]
-            self.layout.view(self.record, "locomotion_actions")[:] = self.locomotion.last_actions
+            # the raw network output, as the push policy's actions column (replay re-runs the network on the inputs)
+            self.layout.view(self.record, "locomotion_actions")[:] = self.locomotion.model.output[0]
         fault = self.limits.clamp(base_command, arm_targets, leg_targets)
         if fault is not None:
             state = self.safety.trip(fault)

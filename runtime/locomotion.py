@@ -8,10 +8,13 @@ IMU, never mocap, so locomotion keeps standing when mocap is lost):
 - ``projected_gravity_b`` (3): ``R_imu^T (0, 0, -1)``
 - ``base_command`` (6): the absolute command (vx, vy, yaw rate, roll, pitch, height)
 - ``leg_joint_position`` (12): ``q_leg - default_joint_positions`` [rad]; ``leg_joint_velocity`` (12)
-- ``last_leg_actions`` (12): the previous network output
+- ``last_leg_actions`` (12): the previous network output, clipped
 - ``arm_joint_position`` (5): ``q_arm - arm default`` (policy contract) [rad]; ``arm_joint_velocity`` (5)
 
-Leg targets = ``default_joint_positions + action_scale * output``.
+Leg targets = ``default_joint_positions + action_scale * clip(output, -action_clip, action_clip)``, with the push
+policy contract's ``action_clip``: the bound at which the simulator's legged push environment clips the same outputs
+(``env.actions.clip``, ``kernels/locomotion.py``'s ``process_leg_actions``). A non-finite output stays non-finite
+(the kernel counts it as zero), so that the command check stops the robot.
 
 The network's contract (a ``locomotion.onnx`` written by ``dynpush export`` from a ``dynpush train --task
 locomotion`` run) is read by ``locomotion_contract.py``, which the simulator's wrapper of the same file reads too;
@@ -48,7 +51,8 @@ class OnnxLocomotion:
             start += size
         self.legs = ActionScaling(cfg.default_joint_positions, cfg.action_scale)  # leg targets [rad] of the outputs
         self._arm_default = np.asarray(contract.arm_default_joint_positions, dtype=np.float64)
-        self.last_actions = np.zeros(NUM_LEG_JOINTS)
+        self.clip = float(contract.action_clip)  # raw outputs are clipped to +-clip before scaling
+        self.last_actions = np.zeros(NUM_LEG_JOINTS)  # the previous outputs, clipped
 
     def _term(self, name: str, state: Proprioception, base_command: np.ndarray) -> np.ndarray:
         if name == "projected_gravity_b":
@@ -67,10 +71,11 @@ class OnnxLocomotion:
         }[name]
 
     def step(self, state: Proprioception, base_command: np.ndarray) -> np.ndarray:
-        """Leg joint targets (12) [rad] for ``base_command``; the observation stays in ``model.input``."""
+        """Leg joint targets (12) [rad] for ``base_command``; the observation stays in ``model.input``, the raw
+        network output in ``model.output``."""
         observation = self.model.input[0]
         for name, scale, columns in self._terms:
             observation[columns] = scale * self._term(name, state, base_command)
-        actions = self.model.run()
-        self.last_actions = actions.astype(np.float64)
+        actions = self.model.run().astype(np.float64)
+        self.last_actions = np.where(np.isfinite(actions), np.clip(actions, -self.clip, self.clip), actions)
         return self.legs.targets(self.last_actions)

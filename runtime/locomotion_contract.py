@@ -8,10 +8,11 @@ call, the observation written by the Warp kernel). Its fields:
 
 - ``observation``: the network's input terms in order, each entering as ``scale * term`` (``LOCOMOTION_TERMS``);
 - ``joint_names``: the 12 leg joints in output order; ``default_joint_positions`` [rad] and ``action_scale`` [rad per
-  unit output]: leg targets ``default_joint_positions + action_scale * output`` (``actions.ActionScaling``);
+  unit output]: leg targets ``default_joint_positions + action_scale * output`` (``actions.ActionScaling``), the output
+  clipped first at the push policy's ``action_clip`` by both sides;
 - ``joint_lower``, ``joint_upper``: the leg joints' position limits [rad];
-- ``values``: the whole document, which also holds the command names and limits, the action clip, the control
-  period [s], the PD gains, the checkpoint and the training config.
+- ``values``: the whole document, which also holds the command names and limits, the action clip of the locomotion
+  training, the control period [s], the PD gains, the checkpoint and the training config.
 
 The runtime's ``locomotion.onnx`` config section (:class:`~.config.OnnxLocomotionConfig`) holds the first group
 (:meth:`LocomotionContract.section`); the runtime refuses a config that disagrees with its file's contract

@@ -13,11 +13,12 @@ from dynpush.policies.env_probe import EE_CONTACT_COLUMN
 from dynpush.policies.episodes import FirstEpisodes
 from dynpush.policies.evaluate import EvalConfig, evaluate
 from dynpush.policies.export import export_policy
+from dynpush.policies.face_switches import FACE_NAMES, NO_FACE, contact_face, count_face_switches
 from dynpush.policies.footprints import FootprintConfig, footprint_study
 from dynpush.policies.observers import ContactMotionObserver, GoalErrorObserver
 from dynpush.policies.tables import paper_table_i_row
-from dynpush.policies.scenarios import (FACE_NAMES, NO_FACE, contact_face, count_face_switches, load_scenario,
-                                        parse_scenario, run_scenario)
+from dynpush.policies.scenario_schema import load_scenario, parse_scenario
+from dynpush.policies.scenarios import run_scenario
 from dynpush.policies.train import TrainConfig, apply_overrides
 from dynpush.sim.config import ConfigError
 

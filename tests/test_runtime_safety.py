@@ -193,6 +193,22 @@ def test_locomotion_onnx_sends_12_leg_and_5_arm_targets(tmp_path):
     np.testing.assert_allclose(obs[9:21], -0.1, rtol=1e-6, err_msg="leg positions relative to the default")
 
 
+@pytest.mark.parametrize("leg_output", [25.0, -1e6])
+def test_locomotion_outputs_are_clipped_at_the_push_policy_action_clip(tmp_path, leg_output):
+    """As the legged simulator clips them (``env.actions.clip``, which the push policy's contract carries as
+    ``action_clip``): an output beyond the bound gives the leg target of the bound, and the next observation's
+    ``last_leg_actions`` hold the clipped output; the tick log keeps the raw one (replay re-runs the network)."""
+    ctrl = controller(tmp_path, locomotion=True, leg_output=leg_output, safety={"arm_ramp_s": 0.02})
+    loco, bound = ctrl.locomotion, math.copysign(ctrl.contract.action_clip, leg_output)
+    assert ctrl.contract.action_clip == 10.0
+    targets = loco.step(robot_state(legs=12), np.zeros(6))
+    np.testing.assert_allclose(targets, 0.1 + 0.5 * bound, err_msg="default + action_scale * the bound")
+    np.testing.assert_allclose(loco.last_actions, bound)
+    ticks = Ticks(ctrl, legs=12)
+    ticks()
+    np.testing.assert_allclose(ctrl.record[ctrl.layout.slices["locomotion_actions"]], leg_output)
+
+
 @pytest.mark.parametrize("leg_output", [np.nan, np.inf])
 def test_a_command_that_is_not_finite_is_never_sent(tmp_path, leg_output):
     """The last check before a command leaves: a locomotion network gone NaN or infinite (clamping keeps a NaN a NaN)

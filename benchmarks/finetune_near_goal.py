@@ -30,7 +30,8 @@ NEAR_GOAL = ("env.sampling.goal_radius=(0.0, 0.1)", "env.sampling.object_yaw=(0.
 FINE_TUNE = (
     "network.actor_hidden=(512, 256, 128)", "network.critic_hidden=(512, 256, 128)",  # the shipped networks
     "env.rewards.sigma_task=1.7", "p_max_overrides={'collision': (0.1, 1.0)}",  # the shipped recipe's task
-    "env.num_envs=512", "critic_warmup_iterations=40", "critic_warmup_learning_rate=1e-3",
+    "env.num_envs=512", "fine_tune.critic_warmup_iterations=40",
+    "fine_tune.critic_warmup_learning_rate=1e-3",
     "ppo.schedule=fixed", "ppo.entropy_coef=0.002", "ppo.gamma=0.998",
     # Noise 0.1 with a learning rate scaled down with it keeps the start's success with CaT off; noise 0.2 erodes
     # the mean. With CaT on (as here) the success still falls: the open part of docs/ppo_fine_tuning.md.
@@ -89,7 +90,7 @@ def main() -> int:
     checkpoints = []
     for k in args.checkpoints:
         policy = export_policy(run_dir, checkpoint=f"model_{k}.pt", out=run_dir / f"eval_{k}" / "policy.onnx")
-        checkpoints.append({"iteration": k, "actor_updates": max(0, k + 1 - cfg.critic_warmup_iterations),
+        checkpoints.append({"iteration": k, "actor_updates": max(0, k + 1 - cfg.fine_tune.critic_warmup_iterations),
                             "world_steps": (k + 1) * steps_per_iteration, **rates(policy, run_dir / f"eval_{k}")})
     worst = min(c["success"] for c in checkpoints)
     print(json.dumps({"run_dir": str(run_dir), "overrides": overrides, "start": start, "checkpoints": checkpoints,

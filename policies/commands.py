@@ -237,7 +237,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--init-from", default=None, metavar="CHECKPOINT",
                    help="start a new run from the actor and critic (with their normalisers) of another run's checkpoint,"
                         " e.g. runs/bc/imitation.pt, or from the actor of an exported policy.onnx (e.g. the shipped one;"
-                        " needs critic_warmup_iterations > 0); optimizer, CaT state and iteration count start fresh")
+                        " needs fine_tune.critic_warmup_iterations > 0); optimizer, CaT state and iteration count start fresh")
     p.add_argument("--procs", type=int, default=1,
                    help="processes on this machine (torchrun, gloo on CPU / NCCL on GPUs); env.num_envs is split")
     p.add_argument("--recipe", default=None, metavar="FILE",
@@ -264,7 +264,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--expert-set", nargs="*", metavar="FIELD=VALUE",
                    help="the expert's other gains (ScriptedPusherConfig fields, e.g. push_speed=1.0; after"
                         " --expert-object-size); kept on --resume; the fine-tuning's imitation term takes its own:"
-                        " --set \"expert_overrides=('push_speed=1.0',)\"")
+                        " --set \"fine_tune.expert_overrides=('push_speed=1.0',)\"")
     p.add_argument("--recipe", default=None, metavar="FILE", help="a file of field=value overrides, as for train")
     p.add_argument("--set", nargs="*", metavar="FIELD=VALUE", help="override training config fields, as for train")
     p.set_defaults(func=_imitate)

@@ -10,7 +10,7 @@ Adam step as PPO's (as DAPG, Rajeswaran et al. 2018, adds demonstrations to the 
 ``mu(o)`` is the actor's mean action for the (noisy) observation and ``a_expert(s)`` the scripted pusher's
 action for the true state of the same step (:class:`~dynpush.policies.scripted.ScriptedPusher`); the squared
 norm sums over the 11 action components (policy action units). ``w_imitation`` follows a linear schedule over
-the run (``TrainConfig.imitation_weight``), so PPO can move away from the expert where the returns say so.
+the run (``TrainConfig.fine_tune.imitation_weight``), so PPO can move away from the expert where the returns say so.
 
 Two adapters keep rsl_rl's PPO unchanged:
 

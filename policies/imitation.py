@@ -40,7 +40,8 @@ from .checkpoint_file import read_checkpoint
 from .export import load_run_config
 from .scripted import ScriptedPusher, ScriptedPusherConfig, check_object_size
 from .run_folder import IMITATION_CHECKPOINT, read_json, record_launch
-from .train import TrainConfig, scripted_expert
+from .fine_tune import scripted_expert
+from .train import TrainConfig
 from .training import sigterm_as_keyboard_interrupt
 
 

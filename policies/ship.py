@@ -13,7 +13,6 @@ way into ``dynpush/shipped/locomotion/``: ``locomotion.onnx``, its tracking eval
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 from dynpush.errors import MissingFileError
@@ -102,7 +101,9 @@ def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: 
         source = record["launches"][0].get("init_from")  # a run started with --init-from: its DAgger rounds come first
     plot_learning_curve(run_dir, out_dir / "learning_curve.png", paper_success, record["iterations"],
                         imitation_run=Path(source).parent if source else None)
-    shutil.copyfile(run_dir / "config.json", out_dir / "training_config.json")
+    # The config the export embedded: the run's config.json as read today (an older run's gets the sections and fields
+    # added since, e.g. fine_tune), so that training_config.json equals the policy's training_config.
+    (out_dir / "training_config.json").write_text(json.dumps(load_run_config(run_dir).to_dict(), indent=2))
     (out_dir / "training.json").write_text(json.dumps(record, indent=2))
     return record
 

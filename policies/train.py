@@ -3,7 +3,8 @@
 The ``paper`` preset is the paper's scale (4096 environments, 20000 iterations, III-A) on a GPU; the ``cpu``
 preset is sized for a 2-core laptop-class machine. What every task's training shares (PPO and network configs,
 ``--set`` overrides, the ``train`` job itself) is in ``policies/training.py``; its names below are re-exported
-here for the callers that import them from this module.
+here for the callers that import them from this module. The knobs of a run that starts from another policy or
+follows the scripted pusher are in ``policies/fine_tune.py`` (``TrainConfig.fine_tune``).
 """
 
 from __future__ import annotations
@@ -16,8 +17,8 @@ from dynpush.sim.config import ConfigError, PushEnvConfig
 
 from .curriculum import GoalCurriculumConfig, NearGoalStartConfig
 from .expert_regularization import ExpertLabelledEnv
+from .fine_tune import MOVED_FIELDS, FineTuneConfig, scripted_expert  # noqa: F401  (scripted_expert: re-exported)
 from .schedules import ConstraintCurriculumConfig
-from .scripted import ScriptedPusherConfig, check_object_size
 from .training import (  # noqa: F401  (re-exported: the CLI, tests and benchmarks import them from here)
     PRESETS,
     NetworkConfig,
@@ -47,31 +48,18 @@ class TrainConfig:
     scale_schedules_with_run_length: bool = True
     # Constraint groups whose p_max is held at 0 (Table I ablation: "w/o object balance constraint").
     disabled_constraint_groups: tuple[str, ...] = ()
-    # CaT p_max curricula replacing the paper's (Table "Rewards and constraints") for some groups:
-    # group -> (initial, final), ramped like the others; e.g. {'collision': (0.1, 1.0)}.
+    # CaT p_max curricula replacing the paper's (Table "Rewards and constraints") for some groups: group ->
+    # (initial, final) maximum termination probability, each in [0, 1], ramped like the others (schedules.py);
+    # e.g. {'collision': (0.1, 1.0)}. With disabled_constraint_groups, the run's CaT curriculum
+    # (runner_cfg()["schedule"]["constraints"]); runs from scratch set it too (configs/recipes/long_run.txt).
     p_max_overrides: dict[str, tuple[float, float]] = field(default_factory=dict)
     curriculum: GoalCurriculumConfig = field(default_factory=GoalCurriculumConfig)
     # Training resets that start near the goal with the yaw off (ours, policies/curriculum.py); evaluation never
     # uses them: the evaluation environment is built from ``env`` alone (policies/trained_env.py).
     near_goal_starts: NearGoalStartConfig = field(default_factory=NearGoalStartConfig)
-    # Iterations at the start of the run in which only the critic learns and the actor is held (ours): for
-    # runs that start from a ``dynpush imitate`` checkpoint, whose critic has not learnt the returns yet.
-    critic_warmup_iterations: int = 0
-    # Learning rate of those warm-up iterations (ours; None: ppo.learning_rate); the run's takes over with the actor.
-    # Fine-tuning a ``dynpush imitate`` actor, the critic explained 7-14 % of the variance of the returns after 30
-    # iterations at 1e-4, 52-64 % after 40-74 at 1e-3 (docs/experiments/expert_guided_initialisation.md, "Where the
-    # fine-tunings lose it").
-    critic_warmup_learning_rate: float | None = None
-    # Weight of the scripted pusher's imitation term in PPO's loss, (first, last iteration), linear in between
-    # (ours, policies/expert_regularization.py); (0, 0) is plain CaT-PPO.
-    imitation_weight: tuple[float, float] = (0.0, 0.0)
-    # The imitation term's expert: None reads the true object size, shape and centre of mass; an edge [m] makes it
-    # treat every object as a centred cuboid of that edge (ScriptedPusherConfig.object_size), the teacher of a
-    # ``dynpush imitate --expert-object-size`` student.
-    expert_object_size: float | None = None
-    # More of that expert's gains, FIELD=VALUE of ScriptedPusherConfig (e.g. "push_speed=1.0"), the teacher of a
-    # ``dynpush imitate --expert-set`` student.
-    expert_overrides: tuple[str, ...] = ()
+    # Critic warm-up and the scripted pusher's imitation term: what matters only when a run starts from another
+    # policy (--init-from) or is anchored to the expert (policies/fine_tune.py); the defaults are plain CaT-PPO.
+    fine_tune: FineTuneConfig = field(default_factory=FineTuneConfig)
     # Iterations between evaluations during training (ours; 0: none). Rank 0 runs the deterministic mean of the
     # current actor for one episode in each of eval_episodes worlds of the paper's task (the run's environment with
     # PushEnvConfig's default sampling), the loop of ``dynpush eval``, and appends the result to evaluations.jsonl.
@@ -83,6 +71,9 @@ class TrainConfig:
     eval_seed: int = 0  # the evaluation environment's seed; every evaluation of a run starts the same episodes
     # The newest model_K.pt kept after each save (0: all): a run folder under version control keeps a few.
     keep_checkpoints: int = 0
+
+    # Not a field: the flat names of fields that moved into a section; apply_overrides names the new path.
+    MOVED_FIELDS = MOVED_FIELDS
 
     @staticmethod
     def preset_config(name: str) -> TrainConfig:
@@ -103,11 +94,7 @@ class TrainConfig:
         if self.env.legged.enabled and not self.env.legged.locomotion_policy:
             raise ConfigError("env.legged.locomotion_policy must name a locomotion.onnx to train in legged mode"
                               " (without one the legs hold their default targets)")
-        if not isinstance(self.critic_warmup_iterations, int) or self.critic_warmup_iterations < 0:
-            raise ConfigError(f"critic_warmup_iterations must be an integer >= 0, got {self.critic_warmup_iterations!r}")
-        if self.critic_warmup_learning_rate is not None and not 0.0 < self.critic_warmup_learning_rate <= 1e-2:
-            raise ConfigError("critic_warmup_learning_rate must be None or in (0, 0.01], got"
-                              f" {self.critic_warmup_learning_rate!r}")
+        self.fine_tune.validate()
         for name in ("iterations", "num_steps_per_env", "save_interval"):
             if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be an integer >= 1, got {getattr(self, name)!r}")
@@ -119,10 +106,6 @@ class TrainConfig:
         for name, pair in self.p_max_overrides.items():
             if len(pair) != 2 or not all(0.0 <= p <= 1.0 for p in pair):
                 raise ConfigError(f"p_max_overrides[{name!r}] must be (initial, final) within [0, 1], got {pair!r}")
-        if len(self.imitation_weight) != 2 or not all(w >= 0.0 for w in self.imitation_weight):
-            raise ConfigError(f"imitation_weight must be (first, last) with both >= 0, got {self.imitation_weight!r}")
-        check_object_size("expert_object_size", self.expert_object_size)
-        scripted_expert(self.expert_object_size, self.expert_overrides, "expert_overrides")
         self.ppo.validate()
         for name, low in (("eval_interval", 0), ("eval_episodes", 1), ("keep_checkpoints", 0)):
             if not isinstance(getattr(self, name), int) or getattr(self, name) < low:
@@ -136,13 +119,23 @@ class TrainConfig:
         """The push environment of ``env`` (tracked base, or the legged robot with ``env.legged.enabled``)."""
         from dynpush.sim.envs import make_push_env
 
-        if max(self.imitation_weight) == 0:
+        if not self.fine_tune.imitates:
             return make_push_env(env)
-        return ExpertLabelledEnv(make_push_env(env), scripted_expert(self.expert_object_size, self.expert_overrides,
-                                                                    "expert_overrides"))
+        return ExpertLabelledEnv(make_push_env(env), self.fine_tune.expert())
 
     @staticmethod
     def from_dict(data: dict) -> TrainConfig:
+        """The config of a ``config.json`` (or an exported policy's ``training_config``). Runs written before the
+        ``fine_tune`` section existed hold its fields at the top level (``MOVED_FIELDS``): they are read into it, with
+        the same values; the caller's dict is left unchanged."""
+        data = dict(data)
+        moved = {name: data.pop(name) for name in MOVED_FIELDS if name in data}
+        if moved:
+            section = dict(data.get("fine_tune", {}))
+            both = sorted(set(moved) & set(section))
+            if both:
+                raise ConfigError(f"config holds both {both[0]} and {MOVED_FIELDS[both[0]]}; keep one")
+            data["fine_tune"] = {**section, **moved}
         return config_from_dict(TrainConfig, data)
 
     def runner_cfg(self) -> dict:
@@ -157,19 +150,9 @@ class TrainConfig:
             },
             "curriculum": dataclasses.asdict(self.curriculum),
             "near_goal_starts": dataclasses.asdict(self.near_goal_starts),
-            "critic_warmup_iterations": self.critic_warmup_iterations,
-            "critic_warmup_learning_rate": self.critic_warmup_learning_rate,
-            "imitation_weight": tuple(self.imitation_weight),
+            "critic_warmup_iterations": self.fine_tune.critic_warmup_iterations,
+            "critic_warmup_learning_rate": self.fine_tune.critic_warmup_learning_rate,
+            "imitation_weight": tuple(self.fine_tune.imitation_weight),
             "keep_checkpoints": self.keep_checkpoints,
         }
 
-
-def scripted_expert(object_size: float | None, overrides: tuple[str, ...], name: str) -> ScriptedPusherConfig:
-    """The scripted pusher's config for imitation: ``object_size`` (None: the true size) and then ``overrides``
-    (FIELD=VALUE of ScriptedPusherConfig) on its defaults, checked; errors name the config field ``name``."""
-    try:
-        cfg = apply_overrides(ScriptedPusherConfig(object_size=object_size), list(overrides))
-        cfg.validate()
-    except ConfigError as error:
-        raise ConfigError(f"{name}: {error}") from None
-    return cfg

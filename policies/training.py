@@ -179,11 +179,17 @@ def apply_recipe(cfg: T, recipe: Path | None, overrides: list[str]) -> T:
 
 
 def apply_overrides(cfg: T, overrides: list[str]) -> T:
-    """Applies ``dotted.field=value`` overrides to a config dataclass (values parsed as Python literals, else strings)."""
+    """Applies ``dotted.field=value`` overrides to a config dataclass (values parsed as Python literals, else strings).
+
+    A field that moved into a section (the config class's ``MOVED_FIELDS``, old name -> new path, e.g.
+    ``critic_warmup_iterations`` -> ``fine_tune.critic_warmup_iterations``) is a ConfigError naming its new path."""
+    moved = getattr(cfg, "MOVED_FIELDS", {})
     for item in overrides:
         if "=" not in item:
             raise ConfigError(f"override must look like field.path=value, got {item!r}")
         path, text = item.split("=", 1)
+        if path in moved:
+            raise ConfigError(f"{path} is now {moved[path]}: set {moved[path]}={text}")
         target = cfg
         keys = path.split(".")
         for key in keys[:-1]:
@@ -258,8 +264,8 @@ def train(cfg: TaskTrainConfig, run_dir: Path, resume: bool = False, command: st
     (learning rate of ``cfg``), action noise (``cfg.network.init_noise_std``), CaT state, iteration count and
     episodes are its own. ``init_from`` may also be an exported push ``policy.onnx`` (e.g. the shipped one): the
     actor and its normaliser come from the file, the critic starts fresh and learns during
-    ``critic_warmup_iterations`` (required) while the actor is held. Nothing is written into ``run_dir`` before all
-    of these inputs have been read and checked (policies/run_folder.py).
+    ``fine_tune.critic_warmup_iterations`` (required) while the actor is held. Nothing is written into ``run_dir``
+    before all of these inputs have been read and checked (policies/run_folder.py).
 
     ``hours``: this launch ends at the last iteration boundary before ``hours`` from ``started`` (``time.time()``
     of the launch; default: now), with a checkpoint that ``--resume`` continues.
@@ -326,12 +332,13 @@ def read_onnx_actor(cfg: TaskTrainConfig, init_from: Path | None) -> torch.nn.Mo
     None when ``init_from`` is not an ONNX file."""
     if init_from is None or init_from.suffix != ".onnx":
         return None
-    if not hasattr(cfg, "critic_warmup_iterations"):  # the push task's config; the critic must learn first
+    if not hasattr(cfg, "fine_tune"):  # the push task's config; the critic must learn first
         raise ConfigError(f"--init-from {init_from}: an ONNX file can start a push run only; a locomotion run starts"
                           " from a checkpoint (model_K.pt)")
-    if not cfg.critic_warmup_iterations:
-        raise ConfigError(f"--init-from {init_from}: an ONNX file holds the actor only; set critic_warmup_iterations > 0"
-                          " (e.g. 60) so that the new critic learns the returns before the actor is trained")
+    if not cfg.fine_tune.critic_warmup_iterations:
+        raise ConfigError(f"--init-from {init_from}: an ONNX file holds the actor only; set"
+                          " fine_tune.critic_warmup_iterations > 0 (e.g. 60) so that the new critic learns the returns"
+                          " before the actor is trained")
     actor = build_actor(cfg)
     load_onnx_actor(actor, init_from)
     return actor

@@ -171,13 +171,13 @@ def test_a_new_run_starts_from_an_exported_policy_and_ship_counts_its_history(ex
                  "network.actor_hidden=(32, 16)", "network.critic_hidden=(16, 16)"]
     assert main(["train", "--name", "fine", "--runs", str(tmp_path), "--init-from", str(shipped / "policy.onnx"),
                  "--set", *overrides]) != 0
-    assert "holds the actor only; set critic_warmup_iterations > 0" in capsys.readouterr().err
+    assert "holds the actor only; set fine_tune.critic_warmup_iterations > 0" in capsys.readouterr().err
     assert main(["train", "--name", "fine", "--runs", str(tmp_path), "--init-from", str(shipped / "policy.onnx"),
-                 "--set", *overrides, "critic_warmup_iterations=1", "network.actor_hidden=(64, 16)"]) != 0
+                 "--set", *overrides, "fine_tune.critic_warmup_iterations=1", "network.actor_hidden=(64, 16)"]) != 0
     assert "set network.actor_hidden to the file's hidden sizes" in capsys.readouterr().err
     assert not fine.exists()  # both refused before anything was written
     main(["train", "--name", "fine", "--runs", str(tmp_path), "--init-from", str(shipped / "policy.onnx"),
-          "--set", *overrides, "critic_warmup_iterations=1"])
+          "--set", *overrides, "fine_tune.critic_warmup_iterations=1"])
     source = load_actor(run / "model_0.pt", load_run_config(run))
     tuned = load_actor(fine / "model_0.pt", load_run_config(fine))  # the actor was held in the warm-up iteration
     for name, value in source.state_dict().items():

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import torch
 
+from dynpush.policies.fine_tune import FineTuneConfig
 from dynpush.policies.imitation import ImitationConfig, imitate
 from dynpush.policies.train import TrainConfig, apply_overrides, train
 from dynpush.sim.config import ConfigError
@@ -16,7 +17,7 @@ def tiny(iterations: int = 2, warmup: int = 0) -> TrainConfig:
     cfg = TrainConfig.preset_config("cpu")
     return apply_overrides(cfg, ["env.num_envs=8", f"iterations={iterations}", "num_steps_per_env=6", "save_interval=1",
                                  "network.actor_hidden=(32, 32)", "network.critic_hidden=(32, 32)",
-                                 f"critic_warmup_iterations={warmup}"])
+                                 f"fine_tune.critic_warmup_iterations={warmup}"])
 
 
 def tiny_imitation(rounds: int) -> ImitationConfig:
@@ -101,13 +102,13 @@ def test_imitation_config_errors_name_the_field():
         ImitationConfig(expert_overrides=("push_speed=1.5",)).validate()
     with pytest.raises(ConfigError, match="imitation.expert_overrides: unknown config field 'push_sped'"):
         ImitationConfig(expert_overrides=("push_sped=0.9",)).validate()
-    with pytest.raises(ConfigError, match="expert_overrides: override must look like field.path=value"):
-        replace(tiny(), expert_overrides=("push_speed",)).validate()
-    with pytest.raises(ConfigError, match=r"^expert_overrides: scripted.yaw_gain must be a finite number >= 0"):
-        replace(tiny(), expert_overrides=("yaw_gain=-1.0",)).validate()
+    with pytest.raises(ConfigError, match="^fine_tune.expert_overrides: override must look like field.path=value"):
+        replace(tiny(), fine_tune=FineTuneConfig(expert_overrides=("push_speed",))).validate()
+    with pytest.raises(ConfigError, match=r"^fine_tune.expert_overrides: scripted.yaw_gain must be a finite number >= 0"):
+        replace(tiny(), fine_tune=FineTuneConfig(expert_overrides=("yaw_gain=-1.0",))).validate()
     expert = ImitationConfig(expert_object_size=0.4, expert_overrides=("push_speed=0.9", "yaw_gain=0.6")).expert()
     assert (expert.object_size, expert.push_speed, expert.yaw_gain) == (0.4, 0.9, 0.6)
-    with pytest.raises(ConfigError, match="critic_warmup_iterations must be an integer >= 0"):
+    with pytest.raises(ConfigError, match="^fine_tune.critic_warmup_iterations must be an integer >= 0"):
         tiny(warmup=-1).validate()
 
 
@@ -137,10 +138,10 @@ def test_critic_warmup_holds_the_actor_and_trains_the_critic(tmp_path, monkeypat
     assert learning_rates == [[2e-4]] * 3
 
     learning_rates.clear()  # a warm-up learning rate of its own, the run's from the first actor update
-    train(apply_overrides(cfg, ["critic_warmup_learning_rate=0.003"]), tmp_path / "run_lr")
+    train(apply_overrides(cfg, ["fine_tune.critic_warmup_learning_rate=0.003"]), tmp_path / "run_lr")
     assert learning_rates == [[3e-3], [3e-3], [2e-4]]
-    with pytest.raises(ConfigError, match=r"critic_warmup_learning_rate must be None or in \(0, 0.01\]"):
-        apply_overrides(cfg, ["critic_warmup_learning_rate=0.5"]).validate()
+    with pytest.raises(ConfigError, match=r"^fine_tune.critic_warmup_learning_rate must be None or in \(0, 0.01\]"):
+        apply_overrides(cfg, ["fine_tune.critic_warmup_learning_rate=0.5"]).validate()
 
 
 
@@ -150,21 +151,22 @@ def test_expert_regularised_ppo_stores_the_experts_labels_and_pulls_the_actor_to
     from dynpush.policies.scripted import ScriptedPusher
     from dynpush.sim.push_env import PushEnv
 
-    cfg = apply_overrides(tiny(iterations=12), ["imitation_weight=(50.0, 10.0)", "ppo.learning_rate=0.003"])
+    cfg = apply_overrides(tiny(iterations=12), ["fine_tune.imitation_weight=(50.0, 10.0)", "ppo.learning_rate=0.003"])
     env = cfg.make_env(cfg.env)
     assert isinstance(env, ExpertLabelledEnv)
     observations = env.get_observations()
     assert isinstance(env.env, PushEnv)
     expert = ScriptedPusher(env.env)  # an expert of its own on the same state
     np.testing.assert_allclose(observations[EXPERT_ACTION_GROUP].numpy(), expert(None), atol=1e-6)
-    with pytest.raises(ConfigError, match="imitation_weight must be"):
-        apply_overrides(tiny(), ["imitation_weight=(-1.0, 0.0)"]).validate()
-    with pytest.raises(ConfigError, match="expert_object_size must be None or in"):
-        apply_overrides(tiny(), ["expert_object_size=0.0"]).validate()
-    with pytest.raises(ConfigError, match=r"expert_object_size must be float \| None, got 'big'"):
-        apply_overrides(tiny(), ["expert_object_size=big"])
-    assert apply_overrides(tiny(), ["expert_object_size=1", "expert_object_size=None"]).expert_object_size is None
-    assert apply_overrides(tiny(), ["expert_object_size=1"]).expert_object_size == 1.0
+    with pytest.raises(ConfigError, match=r"^fine_tune.imitation_weight must be \(first, last\) with both >= 0"):
+        apply_overrides(tiny(), ["fine_tune.imitation_weight=(-1.0, 0.0)"]).validate()
+    with pytest.raises(ConfigError, match=r"^fine_tune.expert_object_size must be None or in \(0, 2\] m"):
+        apply_overrides(tiny(), ["fine_tune.expert_object_size=0.0"]).validate()
+    with pytest.raises(ConfigError, match=r"^fine_tune.expert_object_size must be float \| None, got 'big'"):
+        apply_overrides(tiny(), ["fine_tune.expert_object_size=big"])
+    assert apply_overrides(tiny(), ["fine_tune.expert_object_size=1",
+                                    "fine_tune.expert_object_size=None"]).fine_tune.expert_object_size is None
+    assert apply_overrides(tiny(), ["fine_tune.expert_object_size=1"]).fine_tune.expert_object_size == 1.0
 
     distances, weights, logged = [], [], []
     original = CaTPPO.update
@@ -185,20 +187,21 @@ def test_expert_regularised_ppo_stores_the_experts_labels_and_pulls_the_actor_to
     assert weights[0] == pytest.approx(50.0) and weights[-1] == pytest.approx(10.0)
     assert all("imitation" in losses and "symmetry" not in losses for losses in logged)
     assert distances[-1] < 0.5 * distances[0]  # a random actor moves toward the expert's actions
-    assert json.loads((tmp_path / "run" / "config.json").read_text())["imitation_weight"] == [50.0, 10.0]
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["fine_tune"]["imitation_weight"] == [50.0, 10.0]
 
 
 def test_the_imitation_term_can_take_the_nominal_size_teacher_of_a_dagger_student():
     from dynpush.policies.expert_regularization import EXPERT_ACTION_GROUP
     from dynpush.policies.scripted import ScriptedPusher, ScriptedPusherConfig
 
-    cfg = apply_overrides(tiny(), ["imitation_weight=(1.0, 0.0)", "expert_object_size=0.4", "env.num_envs=32"])
+    cfg = apply_overrides(tiny(), ["fine_tune.imitation_weight=(1.0, 0.0)", "fine_tune.expert_object_size=0.4",
+                               "env.num_envs=32"])
     env = cfg.make_env(cfg.validate().env)
     labels = env.get_observations()[EXPERT_ACTION_GROUP].numpy()
     nominal = ScriptedPusher(env.env, ScriptedPusherConfig(object_size=0.4))(None)
     np.testing.assert_allclose(labels, nominal, atol=1e-6)
     assert np.abs(labels - ScriptedPusher(env.env)(None)).max() > 0.05  # not the privileged teacher's
-    slower = apply_overrides(cfg, ["expert_overrides=('approach_speed=0.5',)"])  # the robots start away from the object
+    slower = apply_overrides(cfg, ["fine_tune.expert_overrides=('approach_speed=0.5',)"])  # the robots start away from the object
     slow_env = slower.make_env(slower.validate().env)
     slow_labels = slow_env.get_observations()[EXPERT_ACTION_GROUP].numpy()
     slow = ScriptedPusher(slow_env.env, ScriptedPusherConfig(object_size=0.4, approach_speed=0.5))(None)

@@ -42,6 +42,48 @@ def test_tuple_overrides_keep_their_element_type():
             apply_overrides(TrainConfig.preset_config("cpu"), [bad])
 
 
+
+def test_fine_tuning_fields_are_one_section_and_old_configs_read_into_it(tmp_path, capsys):
+    from pathlib import Path
+
+    from dynpush.cli import main
+    from dynpush.policies.fine_tune import FineTuneConfig
+
+    cfg = apply_overrides(TrainConfig.preset_config("cpu"), [
+        "fine_tune.critic_warmup_iterations=60", "fine_tune.critic_warmup_learning_rate=1e-3",
+        "fine_tune.imitation_weight=(1, 0.5)", "fine_tune.expert_object_size=0.4",
+        "fine_tune.expert_overrides=('push_speed=0.9',)"]).validate()
+    assert cfg.fine_tune == FineTuneConfig(60, 1e-3, (1.0, 0.5), 0.4, ("push_speed=0.9",))
+    # A config.json written before the section existed holds the fields flat; it reads with the same values.
+    old = json.loads(json.dumps(cfg.to_dict()))
+    old.update(old.pop("fine_tune"))
+    assert TrainConfig.from_dict(old) == cfg and "fine_tune" not in old and old["critic_warmup_iterations"] == 60
+    with pytest.raises(ConfigError, match="config holds both imitation_weight and fine_tune.imitation_weight"):
+        TrainConfig.from_dict({**old, "fine_tune": {"imitation_weight": [1.0, 1.0]}})
+    root = Path(__file__).resolve().parent.parent
+    long1 = json.loads((root / "campaigns" / "long1" / "config.json").read_text())
+    assert "critic_warmup_iterations" in long1 and "fine_tune" not in long1
+    loaded = TrainConfig.from_dict(long1)
+    assert loaded.fine_tune == FineTuneConfig() and (loaded.iterations, loaded.env.num_envs) == (20000, 1024)
+    assert loaded.p_max_overrides == {"collision": [0.1, 1.0]} and loaded.keep_checkpoints == 1
+    # --resume reads an old run folder's config.json through the same loader.
+    run = tmp_path / "old"
+    run.mkdir()
+    (run / "config.json").write_text(json.dumps(old))
+    from dynpush.policies.training import run_config
+
+    assert run_config(TrainConfig(), run, resume=True, extend_to=None) == cfg
+    # The flat names are no override any more: one line naming the new field.
+    with pytest.raises(ConfigError, match=r"^critic_warmup_iterations is now fine_tune.critic_warmup_iterations: set"
+                                          r" fine_tune.critic_warmup_iterations=60$"):
+        apply_overrides(TrainConfig(), ["critic_warmup_iterations=60"])
+    assert main(["train", "--runs", str(tmp_path), "--name", "r", "--set", "imitation_weight=(1.0, 1.0)"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "imitation_weight is now fine_tune.imitation_weight" in err, err
+    assert not (tmp_path / "r").exists()
+    with pytest.raises(ConfigError, match=r"^fine_tune.critic_warmup_learning_rate must be None or in \(0, 0.01\]"):
+        apply_overrides(TrainConfig(), ["fine_tune.critic_warmup_learning_rate=0.5"]).validate()
+
 def interrupt_update_call(monkeypatch, call: int) -> None:
     """Makes the ``call``-th PPO update raise KeyboardInterrupt (as Ctrl-C during an update would)."""
     from dynpush.policies.cat_ppo import CaTPPO

@@ -80,6 +80,11 @@ class ScriptedPusherConfig:
     tilt_limit: float = 0.1  # rad of object tilt (its z axis from the world's) above which a push backs off
     back_off_speed: float = 0.3  # m/s
     object_size: float | None = None  # m: None reads the true size, shape and centre of mass; else a nominal cuboid edge
+    # Share of each arm joint's velocity limit that the arm action may move at per control step, in (0, 1]: the
+    # expert then keeps the arm action-rate constraint, which its jumps between the carry and push poses violate
+    # (a student cloned from them inherits that, and CaT-PPO then trades success for smoother arm motion).
+    # None: the jumps (the teacher of the shipped policy).
+    arm_rate_share: float | None = None
 
     def validate(self) -> None:
         """Raises a ConfigError naming the first field outside its allowed range."""
@@ -94,6 +99,10 @@ class ScriptedPusherConfig:
                 check_object_size(f"scripted.{name}", value)
             elif name in speeds and not 0.0 < value <= 1.0:
                 raise ConfigError(f"scripted.{name} must be in (0, 1] m/s (the base command's forward limit), got {value!r}")
+            elif name == "arm_rate_share":
+                if value is not None and not 0.0 < value <= 1.0:
+                    raise ConfigError(f"scripted.{name} must be None or in (0, 1] (a share of the arm joints' velocity"
+                                      f" limits), got {value!r}")
             elif name in shares and not 0.0 < value <= 1.0:
                 raise ConfigError(f"scripted.{name} must be in (0, 1] (a share of the face's half width), got {value!r}")
             elif name == "push_pitch":
@@ -119,6 +128,11 @@ class ScriptedPusher:
         rewards = env.cfg.rewards
         self.done_distance = 0.6 * rewards.success_distance
         self.done_angle = 0.6 * np.radians(rewards.success_angle_deg)
+        # Largest change of each arm action per step that keeps the action-rate constraint
+        # (arm_scale * |a_t - a_{t-1}| / control_dt <= velocity limit, kernels/constraints.py) with the share's margin.
+        velocity_limit = env.scene.robot.arm_velocity_limit[: env.num_actions - 6]
+        self.max_arm_step = (None if self.cfg.arm_rate_share is None else
+                             self.cfg.arm_rate_share * velocity_limit * env.cfg.control_dt / env.cfg.actions.arm_scale)
 
     def _object_geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per world: the object's full side lengths (n, 3) [m], shape (n,) (0 cuboid, 1 cylinder) and centre of
@@ -212,5 +226,9 @@ class ScriptedPusher:
         command = np.stack([vx, vy, yaw_rate, 0 * vx, pitch, height], axis=1)
         actions = np.zeros((self.env.num_envs, self.env.num_actions), dtype=np.float32)
         actions[:, :6] = self.base_command.actions(command)
-        actions[:, 6:] = np.where(low[:, None], np.asarray(cfg.push_arm_action), np.asarray(cfg.carry_arm_action))
+        arm = np.where(low[:, None], np.asarray(cfg.push_arm_action), np.asarray(cfg.carry_arm_action))
+        if self.max_arm_step is not None:  # toward the pose from the arm actions the environment executed last
+            previous = self.env.task.actions.numpy()[:, 6:]
+            arm = previous + np.clip(arm - previous, -self.max_arm_step, self.max_arm_step)
+        actions[:, 6:] = arm
         return actions

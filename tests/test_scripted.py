@@ -130,18 +130,21 @@ def test_backs_off_an_object_that_tilts(small_env, monkeypatch):
 
 def test_walks_around_the_object_within_command_limits(small_env):
     """From the goal's side of the object: the expert walks around it without touching it with anything but
-    the end-effector, never commands the base or arm outside their limits, and then pushes it toward the goal."""
+    the end-effector, never commands the base or arm outside their limits nor moves the arm command faster than the
+    action-rate constraint allows (it switches between its carry and push poses here), and then pushes it toward
+    the goal."""
     env = small_env
     episode = EpisodeSpec(dims=(0.5, 0.4, 0.6), mass=4.0, friction=0.6, goal=(1.2, 0.3, 0.0), base=(1.4, -0.4, 3.0))
     env.set_episodes({w: episode for w in range(env.num_envs)})
-    pusher = ScriptedPusher(env)
-    limit_groups = [i for i, (name, _) in enumerate(env.constraint_groups) if name in ("base_command", "arm_command")]
+    pusher = ScriptedPusher(env, ScriptedPusherConfig(arm_rate_share=0.8))
+    limit_groups = [i for i, (name, _) in enumerate(env.constraint_groups) if name in ("base_command", "arm_command",
+                                                                                           "arm_action_rate")]
     goal = np.array(episode.goal[:2])
     start_distance = float(np.linalg.norm(pusher.probe.object()[0, :2] - goal))
     for _ in range(500):
         env.step(torch.from_numpy(pusher(None)))
         assert not (env.reset_t != 0).any(), "episode ended early (object toppled or robot fell)"
-        assert not env.violated_groups_t[:, limit_groups].any(), "a base or arm command outside its limits"
+        assert not env.violated_groups_t[:, limit_groups].any(), "a base or arm command outside its limits or rate"
         assert not env.task.contacts.numpy()[:, :-1].any(), "a robot part other than the end-effector touched the object"
     distance = float(np.linalg.norm(pusher.probe.object()[0, :2] - goal))
     assert distance < start_distance - 0.3
@@ -153,6 +156,7 @@ def test_walks_around_the_object_within_command_limits(small_env):
     ("yaw_gain=-0.5", r"scripted.yaw_gain must be a finite number >= 0"),
     ("object_size=3.0", r"scripted.object_size must be None or in \(0, 2\] m"),
     ("push_arm_action=(0.0, 0.2)", r"scripted.push_arm_action must be 5 finite arm actions"),
+    ("arm_rate_share=1.5", r"scripted.arm_rate_share must be None or in \(0, 1\] \(a share of the arm joints' velocity limits\)"),
 ])
 def test_overrides_out_of_range_name_the_field(small_env, override, message):
     """`benchmarks/scripted_push.py --set` applies overrides with the training config's parser; the pusher checks them."""

@@ -47,7 +47,7 @@ def run(num_envs: int, goal_yaw_difficulty: float, seed: int, png: Path | None, 
     from dynpush.policies.observers import GoalErrorObserver
     from dynpush.policies.tables import ConstraintObserver
     from dynpush.policies.scripted import ScriptedPusher
-    from dynpush.policies.train import scripted_expert
+    from dynpush.policies.fine_tune import scripted_expert
     from dynpush.policies.play import TrajectoryObserver, Trajectories, episode_row, episode_setup, plot_play
     from dynpush.sim.config import ObservationNoiseConfig, PushEnvConfig
     from dynpush.sim.push_env import PushEnv

@@ -17,7 +17,7 @@ from dynpush.sim.config import ConfigError, PushEnvConfig
 
 from .curriculum import GoalCurriculumConfig, NearGoalStartConfig
 from .expert_regularization import ExpertLabelledEnv
-from .fine_tune import MOVED_FIELDS, FineTuneConfig, scripted_expert  # noqa: F401  (scripted_expert: re-exported)
+from .fine_tune import MOVED_FIELDS, FineTuneConfig
 from .schedules import ConstraintCurriculumConfig
 from .training import (  # noqa: F401  (re-exported: the CLI, tests and benchmarks import them from here)
     PRESETS,

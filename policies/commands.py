@@ -1,5 +1,10 @@
-"""``dynpush`` subcommands of dynpush.policies (registered by ``dynpush.cli``): train, imitate, export, eval, play,
-curve, ship.
+"""``dynpush`` subcommands of dynpush.policies (registered by ``dynpush.cli``): train, imitate, export, eval,
+eval-locomotion, scenario, footprints, play, curve, ship.
+
+The four evaluation studies are a command each: ``eval`` (paper Tables I/II of a push policy), ``eval-locomotion``
+(command tracking of a locomotion policy), ``scenario`` (goal sequences of a scenario file) and ``footprints`` (EE
+height vs object footprint). Each checks that its ONNX is of its task (push or locomotion) before anything is run
+or written, and a policy of the other task is refused in one line that names the command for it.
 
 train and imitate read ``args.argv``, the arguments ``dynpush.cli.main`` parsed, to record the user's command.
 """
@@ -13,17 +18,27 @@ import time
 from pathlib import Path
 
 EVAL_EPILOG = """\
-modes (one at a time):
-  (default)          Tables I and II: --episodes first episodes -> eval.json, eval.png
-  --scenario FILE    objects through goal sequences (scenarios/*.yaml) -> scenario.json, scenario.png
-  --footprints       EE height vs object footprint (Fig. "EE height boxplot") -> footprints.json, footprints.png
-  a locomotion.onnx  command tracking per component -> locomotion_eval.json, locomotion_eval.png
+Tables I and II: the first episode of every world, --episodes of them -> eval.json, eval.png
+
+The other studies are commands of their own:
+  dynpush eval-locomotion LOCOMOTION_ONNX  command tracking per component -> locomotion_eval.json, .png
+  dynpush scenario POLICY FILE             objects through goal sequences (scenarios/*.yaml) -> scenario.json, .png
+  dynpush footprints POLICY                EE height vs object footprint (Fig. "EE height boxplot")
+                                           -> footprints.json, .png
 
 Table I ablations are separate trainings evaluated the same way, e.g.
   dynpush train --name no_balance --set "disabled_constraint_groups=('object_balance',)"
   dynpush train --name no_surface --set env.sampling.reach_target_on_surface=False
   dynpush export runs/no_balance && dynpush eval runs/no_balance/policy.onnx
 """
+
+# Options that dynpush eval had before each study became a command of its own: the command that took each over.
+MOVED_EVAL_OPTIONS = {
+    "--scenario": ("?", "dynpush scenario POLICY FILE"),
+    "--footprints": (0, "dynpush footprints POLICY"),
+    "--footprint-episodes": ("?", "dynpush footprints POLICY --episodes-per-footprint N"),
+    "--seconds": ("?", "dynpush eval-locomotion LOCOMOTION_ONNX --seconds S"),
+}
 
 
 def _train(args: argparse.Namespace) -> int:
@@ -100,18 +115,61 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
-def _is_locomotion_policy(path: Path) -> bool:
+class _MovedOption(argparse.Action):
+    """An option that moved to another command (``MOVED_EVAL_OPTIONS``): parsing it records the one-line error that
+    names that command; the command then stops with it (exit status 2) before it reads or writes anything."""
+
+    def __init__(self, option_strings, dest, moved_to: str, **kwargs):
+        self.moved_to = moved_to
+        super().__init__(option_strings, dest, help=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, f"{option_string} is no longer an option of dynpush eval: run {self.moved_to}")
+
+
+def _checked_policy(args: argparse.Namespace, task: str) -> Path:
+    """``args.policy`` once it is known to be a readable ONNX of ``task`` (push or locomotion). A missing or unreadable
+    file stops with one line naming it, a policy of the other task with one line naming the command that evaluates it
+    (:class:`~dynpush.errors.UserError`)."""
+    from dynpush.errors import UserError
     from dynpush.runtime.locomotion_contract import LOCOMOTION_CONTRACT_KEY
     from dynpush.sim.onnx_session import load_onnx, read_metadata
 
-    return path.exists() and LOCOMOTION_CONTRACT_KEY in read_metadata(load_onnx(path))
+    policy = Path(args.policy)
+    locomotion = LOCOMOTION_CONTRACT_KEY in read_metadata(load_onnx(policy))
+    if task == "push" and locomotion:
+        raise UserError(f"{policy} is a locomotion policy: evaluate it with dynpush eval-locomotion"
+                        f" (dynpush {args.command} takes a push policy)")
+    if task == "locomotion" and not locomotion:
+        raise UserError(f"{policy} is not a locomotion policy (no {LOCOMOTION_CONTRACT_KEY} metadata): evaluate a push"
+                        f" policy with dynpush eval (also dynpush scenario, dynpush footprints)")
+    return policy
+
+
+def _eval(args: argparse.Namespace) -> int:
+    from dynpush.errors import UserError
+
+    from .evaluate import EvalConfig, evaluate
+
+    if args.moved:  # an option of another study's command (MOVED_EVAL_OPTIONS)
+        raise UserError(args.moved)
+    policy = _checked_policy(args, "push")
+    cfg = EvalConfig(episodes=args.episodes, num_envs=args.num_envs, noise=args.noise, device=args.device,
+                     seed=args.seed, overrides=tuple(args.set or ()))
+    out = Path(args.out) if args.out else policy.parent / "eval"
+    result = evaluate(policy, cfg, out)
+    print(f"success {result['success_rate']:.2f} % (paper {result['paper']['success_rate']}),"
+          f" toppled {result['toppled_rate']:.2f} % (paper {result['paper']['toppled_rate']})")
+    print("violated [% of time]: " + ", ".join(f"{k} {v:.3f}" for k, v in result["constraint_violation_percent"].items()))
+    print(f"wrote {out / 'eval.json'} and {out / 'eval.png'}")
+    return 0
 
 
 def _eval_locomotion(args: argparse.Namespace) -> int:
     from .locomotion_eval import LocomotionEvalConfig, evaluate_locomotion
 
-    policy = Path(args.policy)
-    cfg = LocomotionEvalConfig(num_envs=args.num_envs or 256, seconds=args.seconds, seed=args.seed, noise=args.noise,
+    policy = _checked_policy(args, "locomotion")
+    cfg = LocomotionEvalConfig(num_envs=args.num_envs, seconds=args.seconds, seed=args.seed, noise=args.noise,
                                overrides=tuple(args.set or ()))
     out = Path(args.out) if args.out else policy.parent / "locomotion_eval"
     result = evaluate_locomotion(policy, cfg, out)
@@ -121,46 +179,34 @@ def _eval_locomotion(args: argparse.Namespace) -> int:
     return 0
 
 
-def _eval(args: argparse.Namespace) -> int:
-    policy = Path(args.policy)
-    if _is_locomotion_policy(policy):
-        return _eval_locomotion(args)
-    overrides = tuple(args.set or ())
-    if args.scenario:
-        from .scenario_schema import load_scenario
-        from .scenarios import run_scenario
+def _scenario(args: argparse.Namespace) -> int:
+    from .scenario_schema import load_scenario
+    from .scenarios import run_scenario
 
-        scenario = load_scenario(Path(args.scenario))
-        out = Path(args.out) if args.out else policy.parent / f"scenario_{scenario.name}"
-        result = run_scenario(policy, scenario, out, args.noise, args.device, args.seed, overrides)
-        summary = {name: {k: row[k] for k in ("success_rate", "face_switches_per_goal")}
-                   for name, row in result["objects"].items()}
-        print(json.dumps(summary, indent=1))
-        print(f"wrote {out / 'scenario.json'} and {out / 'scenario.png'}")
-        return 0
-    if args.footprints:
-        from .footprints import FootprintConfig, footprint_study
+    policy = _checked_policy(args, "push")
+    scenario = load_scenario(Path(args.file))
+    out = Path(args.out) if args.out else policy.parent / f"scenario_{scenario.name}"
+    result = run_scenario(policy, scenario, out, args.noise, args.device, args.seed, tuple(args.set or ()))
+    summary = {name: {k: row[k] for k in ("success_rate", "face_switches_per_goal")}
+               for name, row in result["objects"].items()}
+    print(json.dumps(summary, indent=1))
+    print(f"wrote {out / 'scenario.json'} and {out / 'scenario.png'}")
+    return 0
 
-        cfg = FootprintConfig(successful_episodes=args.footprint_episodes, num_envs=args.num_envs or 512,
-                              device=args.device, seed=args.seed, overrides=overrides)
-        out = Path(args.out) if args.out else policy.parent / "footprints"
-        result = footprint_study(policy, cfg, out)
-        for row in result["footprints"]:
-            stats = row["ee_height_in_contact_m"]
-            print(f"footprint {row['side_m']:.2f} m: {row['successful_episodes']} successful episodes,"
-                  f" median EE height in contact {stats.get('median', float('nan')):.3f} m")
-        print(f"wrote {out / 'footprints.json'} and {out / 'footprints.png'}")
-        return 0
-    from .evaluate import EvalConfig, evaluate
 
-    cfg = EvalConfig(episodes=args.episodes, num_envs=args.num_envs, noise=args.noise, device=args.device,
-                     seed=args.seed, overrides=overrides)
-    out = Path(args.out) if args.out else policy.parent / "eval"
-    result = evaluate(policy, cfg, out)
-    print(f"success {result['success_rate']:.2f} % (paper {result['paper']['success_rate']}),"
-          f" toppled {result['toppled_rate']:.2f} % (paper {result['paper']['toppled_rate']})")
-    print("violated [% of time]: " + ", ".join(f"{k} {v:.3f}" for k, v in result["constraint_violation_percent"].items()))
-    print(f"wrote {out / 'eval.json'} and {out / 'eval.png'}")
+def _footprints(args: argparse.Namespace) -> int:
+    from .footprints import FootprintConfig, footprint_study
+
+    policy = _checked_policy(args, "push")
+    cfg = FootprintConfig(successful_episodes=args.episodes_per_footprint, num_envs=args.num_envs,
+                          device=args.device, seed=args.seed, overrides=tuple(args.set or ()))
+    out = Path(args.out) if args.out else policy.parent / "footprints"
+    result = footprint_study(policy, cfg, out)
+    for row in result["footprints"]:
+        stats = row["ee_height_in_contact_m"]
+        print(f"footprint {row['side_m']:.2f} m: {row['successful_episodes']} successful episodes,"
+              f" median EE height in contact {stats.get('median', float('nan')):.3f} m")
+    print(f"wrote {out / 'footprints.json'} and {out / 'footprints.png'}")
     return 0
 
 
@@ -216,11 +262,20 @@ def _ship(args: argparse.Namespace) -> int:
     return 0
 
 
-def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("policy", help="policy.onnx written by dynpush export")
-    p.add_argument("--noise", action=argparse.BooleanOptionalAction, default=None,
-                   help="actor observation noise on/off (default: as in training)")
-    p.add_argument("--seed", type=int, default=0)
+def _common(p: argparse.ArgumentParser, out: str, policy: str = "push policy.onnx written by dynpush export",
+            device: bool = True, noise: bool = True) -> None:
+    """The arguments of the commands that run an exported policy in the simulator: the policy (``policy``: its help),
+    --out (``out``: its help, with the default), --noise (unless ``noise`` is False), --seed, --device (unless
+    ``device`` is False) and --set."""
+    p.add_argument("policy", help=policy)
+    p.add_argument("--out", default=None, metavar="PATH", help=out)
+    if noise:
+        p.add_argument("--noise", action=argparse.BooleanOptionalAction, default=None,
+                       help="actor observation noise on/off (default: as in training)")
+    p.add_argument("--seed", type=int, default=0, metavar="N", help="seed of the simulated worlds (default 0)")
+    if device:
+        p.add_argument("--device", default="cpu", metavar="DEVICE",
+                       help="simulation device, e.g. cpu or cuda:0 (default cpu)")
     p.add_argument("--set", nargs="*", metavar="env.FIELD=VALUE", help="environment overrides, e.g. env.episode_length_s=10.0")
 
 
@@ -276,28 +331,44 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default=None, help="output file (default: RUN/policy.onnx)")
     p.set_defaults(func=_export)
 
-    p = subparsers.add_parser("eval", help="evaluate policy.onnx: paper Tables I/II, scenarios or the footprint study",
+    p = subparsers.add_parser("eval", help="evaluate a push policy.onnx on the paper's Tables I/II (eval.json, eval.png)",
                               epilog=EVAL_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    _common(p)
-    p.add_argument("--episodes", type=int, default=4096, help="first episodes to run (paper: 4096)")
-    p.add_argument("--num-envs", type=int, default=None,
-                   help="worlds simulated together (default: min(episodes, 1024); footprints: 512;"
-                        " a scenario simulates objects x trials)")
-    p.add_argument("--device", default="cpu")
-    p.add_argument("--out", default=None, help="output folder (default: beside the policy)")
-    mode = p.add_mutually_exclusive_group()
-    mode.add_argument("--scenario", default=None, metavar="FILE", help="scenario YAML (objects and goal sequences)")
-    mode.add_argument("--footprints", action="store_true", help="EE height vs object footprint study")
-    p.add_argument("--footprint-episodes", type=int, default=1000, help="successful episodes per footprint")
-    p.add_argument("--seconds", type=float, default=10.0,
-                   help="locomotion.onnx: seconds each world holds its command (--num-envs worlds, default 256)")
+    _common(p, out="output folder (default: eval/ beside the policy)")
+    p.add_argument("--episodes", type=int, default=4096, metavar="N",
+                   help="first episodes to run, one per world (default 4096, as in the paper)")
+    p.add_argument("--num-envs", type=int, default=None, metavar="N",
+                   help="worlds simulated together; rounds run until --episodes are done (default: min(episodes, 1024))")
+    for option, (nargs, moved_to) in MOVED_EVAL_OPTIONS.items():
+        p.add_argument(option, action=_MovedOption, dest="moved", nargs=nargs, moved_to=moved_to)
     p.set_defaults(func=_eval)
 
+    p = subparsers.add_parser("eval-locomotion", help="evaluate a locomotion.onnx: command tracking per component, falls,"
+                                                      " constraint violations (locomotion_eval.json, .png)")
+    _common(p, out="output folder (default: locomotion_eval/ beside the policy)", device=False,
+            policy="locomotion.onnx written by dynpush export of a locomotion run")
+    p.add_argument("--num-envs", type=int, default=256, metavar="N", help="worlds, one held command each (default 256)")
+    p.add_argument("--seconds", type=float, default=10.0, metavar="S",
+                   help="seconds each world holds its command; the first 2 s are not counted (default 10)")
+    p.set_defaults(func=_eval_locomotion)
+
+    p = subparsers.add_parser("scenario", help="push objects through the goal sequences of a scenario file (paper IV-C):"
+                                               " success and contact face switches per goal (scenario.json, .png)")
+    _common(p, out="output folder (default: scenario_NAME/ beside the policy, NAME: the file's name field)")
+    p.add_argument("file", help="scenario YAML: objects and goal sequences (see scenarios/*.yaml)")
+    p.set_defaults(func=_scenario)
+
+    p = subparsers.add_parser("footprints", help="EE height while in contact for six object footprints, observation"
+                                                 " noise off (paper Fig. \"EE height boxplot\"; footprints.json, .png)")
+    _common(p, out="output folder (default: footprints/ beside the policy)", noise=False)
+    p.add_argument("--episodes-per-footprint", type=int, default=1000, metavar="N",
+                   help="successful episodes to collect per footprint (default 1000, as in the paper)")
+    p.add_argument("--num-envs", type=int, default=512, metavar="N", help="worlds simulated together per footprint (default 512)")
+    p.set_defaults(func=_footprints)
+
     p = subparsers.add_parser("play", help="roll out a few episodes: top-down PNG, optionally a USD animation")
-    _common(p)
-    p.add_argument("--episodes", type=int, default=4)
-    p.add_argument("--out", default=None, help="PNG file (default: play.png beside the policy)")
-    p.add_argument("--usd", default=None, help="also record the rollout as a USD animation (out.usda text, out.usdc binary)")
+    _common(p, out="PNG file (default: play.png beside the policy)", device=False)
+    p.add_argument("--episodes", type=int, default=4, metavar="N", help="episodes, one per world (default 4)")
+    p.add_argument("--usd", default=None, metavar="FILE", help="also record the rollout as a USD animation (out.usda text, out.usdc binary)")
     p.set_defaults(func=_play)
 
     p = subparsers.add_parser("curve", help="learning curve of a run: success and rewards vs wall-clock hours (PNG)")

@@ -21,7 +21,10 @@ Ablations of Table I are separate trainings, then the same evaluation::
         "disabled_constraint_groups=('object_balance',)"
     dynpush export runs/no_balance && dynpush eval runs/no_balance/policy.onnx
 
-The footprint study (``--footprints``) is :mod:`dynpush.policies.footprints`.
+The other studies are commands of their own: ``dynpush scenario`` (goal sequences,
+:mod:`dynpush.policies.scenarios`), ``dynpush footprints`` (the footprint study,
+:mod:`dynpush.policies.footprints`) and, for a locomotion policy, ``dynpush eval-locomotion``
+(:mod:`dynpush.policies.locomotion_eval`).
 
 Frames and units: world frame Z-up (every environment has its origin at the world origin), SI units,
 quaternions (x, y, z, w).

@@ -1,4 +1,4 @@
-"""``dynpush eval policy.onnx --footprints``: the study of the paper's Fig. "EE height boxplot" (IV-D).
+"""``dynpush footprints policy.onnx``: the study of the paper's Fig. "EE height boxplot" (IV-D).
 
 Cuboids with six square xy-footprints across the training range, fixed height, mass, CoM and friction, observation
 noise off, N successful episodes per footprint; the end-effector height (world z, m) while it touches the object.

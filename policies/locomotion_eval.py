@@ -1,4 +1,4 @@
-"""Evaluation of a locomotion policy (``dynpush eval locomotion.onnx``): command tracking per component.
+"""Evaluation of a locomotion policy (``dynpush eval-locomotion locomotion.onnx``): command tracking per component.
 
 Every world draws one command of the training distribution (``LocomotionEnvConfig.commands``) and holds it
 for ``seconds``; the random arm motions, base pushes, end-effector forces and base masses of training go on (at

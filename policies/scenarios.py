@@ -1,6 +1,6 @@
 """Scenario runs: each object of a scenario file pushed through its goal sequence, as in the hardware tests (IV-C).
 
-``dynpush eval policy.onnx --scenario scenarios/hardware_like.yaml`` runs every object's sequence ``trials`` times
+``dynpush scenario policy.onnx scenarios/hardware_like.yaml`` runs every object's sequence ``trials`` times
 (all runs in parallel worlds) and reports, per object, the success rate per goal and the contact face switches per
 goal, beside the paper's values where the file gives them (``scenario.json``, and ``scenario.png`` by
 ``scenario_plot.py``). The file format is ``scenario_schema.py``'s.

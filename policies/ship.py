@@ -86,8 +86,8 @@ def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: 
     """Writes the shipped files of ``run_dir``'s checkpoint (default: the latest) into ``out_dir``; returns training.json.
 
     A push run's files are ``policy.onnx`` and its ``dynpush eval`` of ``episodes`` episodes; a locomotion run's
-    ``locomotion.onnx`` and its tracking evaluation on ``locomotion_worlds`` worlds (``dynpush eval
-    locomotion.onnx``, locomotion_eval.json / .png)."""
+    ``locomotion.onnx`` and its tracking evaluation on ``locomotion_worlds`` worlds (``dynpush
+    eval-locomotion``, locomotion_eval.json / .png)."""
     run_dir = Path(run_dir)
     checkpoint_path = resolve_checkpoint(run_dir, checkpoint)
     record = provenance(run_dir, checkpoint_path)

@@ -1,5 +1,5 @@
 """The environment an exported push policy was trained in, rebuilt from the ``training_config`` of its ONNX
-metadata for evaluation (``dynpush eval``, ``play``, scenarios, sim-to-sim)."""
+metadata for evaluation (``dynpush eval``, ``scenario``, ``footprints``, ``play``, sim-to-sim)."""
 
 from __future__ import annotations
 

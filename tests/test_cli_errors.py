@@ -1,8 +1,10 @@
 """User errors end ``dynpush`` with one line naming the file or field and exit status 2, never a traceback: missing or
-corrupt run folders, checkpoints, policies and tick logs, a crafted checkpoint, invalid runtime configs."""
+corrupt run folders, checkpoints, policies and tick logs, a crafted checkpoint, invalid runtime configs, a policy given
+to the other task's evaluation and the options that moved from ``dynpush eval`` to commands of their own."""
 
 import json
 import os
+from pathlib import Path
 
 import pytest
 import torch
@@ -55,9 +57,10 @@ def test_export_refuses_a_crafted_checkpoint_without_running_it(run, tmp_path, c
     assert not marker.exists() and not (run / "policy.onnx").exists()
 
 
-@pytest.mark.parametrize("command", ["play", "eval"])
-def test_play_and_eval_of_a_missing_policy(tmp_path, capsys, command):
-    assert f"ONNX file {tmp_path / 'none.onnx'} not found" in one_line_error(capsys, [command, str(tmp_path / "none.onnx")])
+@pytest.mark.parametrize("command", [["play"], ["eval"], ["eval-locomotion"], ["footprints"], ["scenario", "s.yaml"]])
+def test_play_and_evaluations_of_a_missing_policy(tmp_path, capsys, command):
+    argv = [command[0], str(tmp_path / "none.onnx"), *command[1:]]
+    assert f"ONNX file {tmp_path / 'none.onnx'} not found" in one_line_error(capsys, argv)
 
 
 def test_play_of_a_corrupt_or_foreign_policy(tmp_path, capsys):
@@ -105,3 +108,36 @@ def test_eval_of_a_corrupt_policy(tmp_path, capsys):
     policy = tmp_path / "policy.onnx"
     policy.write_bytes(b"\x08\x07garbage" * 8)
     assert f"{policy} is not an ONNX model" in one_line_error(capsys, ["eval", str(policy)])
+
+
+SCENARIO = Path(__file__).parents[1] / "scenarios" / "quick.yaml"
+
+
+@pytest.mark.parametrize("command", [["eval"], ["footprints"], ["scenario", str(SCENARIO)]])
+def test_push_evaluations_refuse_a_locomotion_policy_naming_eval_locomotion(tmp_path, capsys, command):
+    from dynpush.shipped import LOCOMOTION_DIR
+
+    policy, out = LOCOMOTION_DIR / "locomotion.onnx", tmp_path / "out"
+    err = one_line_error(capsys, [command[0], str(policy), *command[1:], "--out", str(out)])
+    assert f"{policy} is a locomotion policy: evaluate it with dynpush eval-locomotion" in err
+    assert not out.exists()
+
+
+def test_eval_locomotion_refuses_a_push_policy_naming_eval(tmp_path, capsys):
+    out = tmp_path / "out"
+    err = one_line_error(capsys, ["eval-locomotion", str(write_policy(tmp_path / "p.onnx")), "--out", str(out)])
+    assert f"{tmp_path / 'p.onnx'} is not a locomotion policy" in err and "evaluate a push policy with dynpush eval" in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("options, command", [
+    (["--footprints"], "dynpush footprints POLICY"),
+    (["--scenario", "scenarios/quick.yaml"], "dynpush scenario POLICY FILE"),
+    (["--footprint-episodes", "5"], "dynpush footprints POLICY --episodes-per-footprint N"),
+    (["--seconds", "3"], "dynpush eval-locomotion LOCOMOTION_ONNX --seconds S"),
+])
+def test_eval_options_of_the_other_studies_name_their_command(tmp_path, capsys, options, command):
+    policy = write_policy(tmp_path / "p.onnx")
+    err = one_line_error(capsys, ["eval", str(policy), *options])
+    assert f"{options[0]} is no longer an option of dynpush eval: run {command}" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.onnx"], "nothing written, not even the default eval/"

@@ -1,4 +1,5 @@
-"""dynpush eval / play: Tables I-II evaluation, scenario files and face switches, footprint study, rollout pictures."""
+"""dynpush eval, scenario, footprints and play: Tables I-II evaluation, scenario files and face switches, footprint
+study, rollout pictures."""
 
 import json
 
@@ -18,7 +19,6 @@ from dynpush.policies.footprints import FootprintConfig, footprint_study
 from dynpush.policies.observers import ContactMotionObserver, GoalErrorObserver
 from dynpush.policies.tables import paper_table_i_row
 from dynpush.policies.scenario_schema import load_scenario, parse_scenario
-from dynpush.policies.scenarios import run_scenario
 from dynpush.policies.train import TrainConfig, apply_overrides
 from dynpush.sim.config import ConfigError
 
@@ -300,11 +300,14 @@ def test_example_scenario_files_are_valid():
         assert scenario.objects and all(o.goals for o in scenario.objects)
 
 
-def test_scenario_runs_goal_sequences(policy, tmp_path):
-    """Goals at the object's own pose succeed at once and the next goal follows; an unreachable one times out."""
+def test_scenario_runs_goal_sequences(policy, tmp_path, capsys):
+    """``dynpush scenario``: goals at the object's own pose succeed at once and the next goal follows; an unreachable
+    one times out."""
     path = tmp_path / "t.yaml"
     path.write_text(yaml.safe_dump(valid_scenario()))
-    result = run_scenario(policy, load_scenario(path), tmp_path, noise=False)
+    assert main(["scenario", str(policy), str(path), "--out", str(tmp_path), "--no-noise"]) == 0
+    assert f"wrote {tmp_path / 'scenario.json'} and {tmp_path / 'scenario.png'}" in capsys.readouterr().out
+    result = json.loads((tmp_path / "scenario.json").read_text())
     box = [(g["goal"], g["outcome"]) for g in result["goals"] if g["object"] == "box"]
     assert box == [(0, "success"), (1, "success"), (2, "timeout")]
     assert result["goals"][0]["time_s"] == pytest.approx(0.02)
@@ -327,6 +330,17 @@ def test_footprint_study_on_a_tiny_setting(policy, tmp_path):
     assert "count" in rows[0]["ee_height_in_contact_m"]
     assert json.loads((tmp_path / "footprints.json").read_text())["config"]["sides"] == [0.3, 0.6]
     assert is_png(tmp_path / "footprints.png")
+
+
+def test_footprints_command_collects_the_episodes_of_every_footprint(policy, tmp_path, capsys):
+    """``dynpush footprints`` with goals at the object's start pose: one round per footprint completes the study."""
+    assert main(["footprints", str(policy), "--episodes-per-footprint", "2", "--num-envs", "2", "--out", str(tmp_path),
+                 "--set", "env.episode_length_s=0.2", "env.sampling.goal_radius=(0.0, 0.0)",
+                 "env.sampling.object_yaw=(0.0, 0.0)", "env.sampling.goal_yaw=(0.0, 0.0)"]) == 0
+    saved = json.loads((tmp_path / "footprints.json").read_text())
+    assert saved["config"]["successful_episodes"] == 2 and saved["config"]["num_envs"] == 2
+    assert [row["successful_episodes"] for row in saved["footprints"]] == [2] * len(FootprintConfig().sides)
+    assert f"wrote {tmp_path / 'footprints.json'} and {tmp_path / 'footprints.png'}" in capsys.readouterr().out
 
 
 def test_play_writes_a_picture_and_a_usd_animation(policy, tmp_path):

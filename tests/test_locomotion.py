@@ -224,7 +224,7 @@ def test_sim2sim_with_the_runtime_running_the_locomotion_onnx(locomotion_run, ro
 
 def test_eval_of_a_locomotion_onnx_writes_tracking_errors_under_the_requested_disturbances(locomotion_run, tmp_path, capsys):
     _, path = locomotion_run
-    main(["eval", str(path), "--num-envs", "4", "--seconds", "2.1", "--out", str(tmp_path),
+    main(["eval-locomotion", str(path), "--num-envs", "4", "--seconds", "2.1", "--out", str(tmp_path),
           "--set", "env.randomization.arm_amplitude=(0.3, 0.3, 0.3, 0.3, 0.1)"])
     summary = json.loads((tmp_path / "locomotion_eval.json").read_text())
     assert summary["arm_amplitude_rad"] == [0.3, 0.3, 0.3, 0.3, 0.1] and summary["push_velocity_m_s"] == 0.5
@@ -236,7 +236,7 @@ def test_eval_of_a_locomotion_onnx_writes_tracking_errors_under_the_requested_di
         assert p50 <= p90 <= p99 and summary["constraint_units"][name]
         assert (share >= 50.0 if p50 > 0 else share <= 50.0) and (share >= 1.0 if p99 > 0 else share <= 1.0), name
     assert (tmp_path / "locomotion_eval.png").read_bytes()[:4] == b"\x89PNG"
-    assert main(["eval", str(path), "--out", str(tmp_path), "--set", "ppo.learning_rate=0.1"]) == 2
+    assert main(["eval-locomotion", str(path), "--out", str(tmp_path), "--set", "ppo.learning_rate=0.1"]) == 2
     assert "a locomotion evaluation takes env.* overrides only, got 'ppo.learning_rate=0.1'" in capsys.readouterr().err
 
 

@@ -155,7 +155,7 @@ def measure(steps: int, overrides: tuple[str, ...] = ()) -> list[dict]:
     the end-effector's mean offset across the push and height above the floor while touching [m], the object-floor
     contacts at the start and the end-effector-object friction coefficient. ``overrides``: ``PushEnvConfig`` fields
     (``sim.solver=mujoco``), with the training config's parser."""
-    from dynpush.kernels.contacts import ROLE_EE
+    from dynpush.kernels.push.contacts import ROLE_EE
     from dynpush.policies.env_probe import yaw_of
     from dynpush.policies.scripted import ScriptedPusher, ScriptedPusherConfig
     from dynpush.policies.train import apply_overrides

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dynpush.kernels.constraints import CONSTRAINT_GROUPS
+from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
 
 SANITY_TASK = [
     "scale_schedules_with_run_length=False", "env.episode_length_s=8.0",

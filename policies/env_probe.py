@@ -12,7 +12,7 @@ import numpy as np
 import torch
 import warp as wp
 
-from dynpush.kernels.observations import POLICY_TERMS, PRIVILEGED_TERMS
+from dynpush.kernels.push.observations import POLICY_TERMS, PRIVILEGED_TERMS
 from dynpush.runtime.observation import NUM_ARM_JOINTS, quat_to_matrix
 
 if TYPE_CHECKING:

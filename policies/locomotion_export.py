@@ -1,7 +1,7 @@
 """ONNX export of a trained locomotion policy (``dynpush export`` of a ``--task locomotion`` run).
 
 ``locomotion.onnx``: input ``obs`` [1, 61] float32, the un-normalised observation in the layout of
-``dynpush.kernels.locomotion.POLICY_TERMS`` (every term of the runtime's ``LOCOMOTION_TERMS``, scale 1);
+``dynpush.kernels.locomotion.observations.POLICY_TERMS`` (every term of the runtime's ``LOCOMOTION_TERMS``, scale 1);
 output ``actions`` [1, 12] float32, the deterministic mean before the environment's clip. Leg targets
 ``default + action_scale * actions`` in ``LEG_JOINT_NAMES`` order. The metadata holds its
 :class:`~dynpush.runtime.locomotion_contract.LocomotionContract`: the runtime's
@@ -16,7 +16,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from dynpush.assets_usd import LEG_JOINT_NAMES
-from dynpush.kernels.locomotion import NUM_LEG_JOINTS, NUM_POLICY_OBS, POLICY_TERMS
+from dynpush.kernels.locomotion.observations import NUM_POLICY_OBS, POLICY_TERMS
+from dynpush.kernels.locomotion.views import NUM_LEG_JOINTS
 from dynpush.runtime.actions import BASE_COMMAND_NAMES
 from dynpush.runtime.config import LocomotionTerm, OnnxLocomotionConfig
 from dynpush.runtime.locomotion_contract import LocomotionContract

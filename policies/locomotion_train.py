@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
-from dynpush.kernels.locomotion import CONSTRAINT_GROUPS
+from dynpush.kernels.locomotion.constraints import CONSTRAINT_GROUPS
 from dynpush.sim.config import ConfigError
 from dynpush.sim.locomotion_config import LocomotionEnvConfig
 

@@ -16,7 +16,7 @@ import torch
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from dynpush.kernels.constraints import CONSTRAINT_GROUPS
+from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
 from dynpush.sim.config import ConfigError
 
 

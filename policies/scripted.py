@@ -129,7 +129,8 @@ class ScriptedPusher:
         self.done_distance = 0.6 * rewards.success_distance
         self.done_angle = 0.6 * np.radians(rewards.success_angle_deg)
         # Largest change of each arm action per step that keeps the action-rate constraint
-        # (arm_scale * |a_t - a_{t-1}| / control_dt <= velocity limit, kernels/constraints.py) with the share's margin.
+        # (arm_scale * |a_t - a_{t-1}| / control_dt <= velocity limit, kernels/push/constraints.py) with the share's
+        # margin.
         velocity_limit = env.scene.robot.arm_velocity_limit[: env.num_actions - 6]
         self.max_arm_step = (None if self.cfg.arm_rate_share is None else
                              self.cfg.arm_rate_share * velocity_limit * env.cfg.control_dt / env.cfg.actions.arm_scale)

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
-from dynpush.kernels.constraints import CONSTRAINT_GROUPS
+from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
 
 from .episodes import FirstEpisodes, Policy, run_first_episodes
 from .sample_stats import percent

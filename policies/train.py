@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
-from dynpush.kernels.constraints import CONSTRAINT_GROUPS
+from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
 from dynpush.sim.config import ConfigError, PushEnvConfig
 
 from .curriculum import GoalCurriculumConfig, NearGoalStartConfig

@@ -9,7 +9,7 @@ contract's order). The raw policy output is clipped to ``+-clip``, then
 
 Who uses it: the runtime's controller turns the ONNX output into commands with the parameters of the policy's
 contract (``PolicyContract.action_mapping``); the simulator builds its own from its config and robot
-(``PushEnv.action_mapping``) and launches the same formula on the GPU as the Warp kernel ``kernels/actions.py``
+(``PushEnv.action_mapping``) and launches the same formula on the GPU as the Warp kernel ``kernels/push/actions.py``
 (``tests/test_action_mapping.py`` checks that both agree on random actions); sim-to-sim hands the runtime's commands
 to the simulator as actions through the inverse, :meth:`ActionMapping.actions`, and so does the runtime for the
 previous action it records outside PUSH. The locomotion policy's leg targets use :class:`ActionScaling` too.

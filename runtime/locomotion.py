@@ -13,8 +13,8 @@ IMU, never mocap, so locomotion keeps standing when mocap is lost):
 
 Leg targets = ``default_joint_positions + action_scale * clip(output, -action_clip, action_clip)``, with the push
 policy contract's ``action_clip``: the bound at which the simulator's legged push environment clips the same outputs
-(``env.actions.clip``, ``kernels/locomotion.py``'s ``process_leg_actions``). A non-finite output stays non-finite
-(the kernel counts it as zero), so that the command check stops the robot.
+(``env.actions.clip``, ``kernels/locomotion/actions.py``'s ``process_leg_actions``). A non-finite output stays
+non-finite (the kernel counts it as zero), so that the command check stops the robot.
 
 The network's contract (a ``locomotion.onnx`` written by ``dynpush export`` from a ``dynpush train --task
 locomotion`` run) is read by ``locomotion_contract.py``, which the simulator's wrapper of the same file reads too;

@@ -1,8 +1,8 @@
 """The locomotion ONNX's observation terms and their sizes: pure constants, no imports beyond numpy.
 
 Shared by the runtime (``config.py`` checks a configured observation against them, ``locomotion.py`` builds
-it) and the simulator's locomotion kernels (``kernels/locomotion.py`` writes the actor observation in this
-order), so both sides of the contract read one definition.
+it) and the simulator's locomotion kernels (``kernels/locomotion/observations.py`` writes the actor observation
+in this order), so both sides of the contract read one definition.
 """
 
 from __future__ import annotations

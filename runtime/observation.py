@@ -3,7 +3,7 @@
 The runtime measures the base and object poses (motion capture), the base twist (state estimator),
 the end-effector position (arm forward kinematics) and the arm joint readings, and turns them into
 the 54-d vector the push policy was trained on. The layout and frames are those of the simulator's
-``compute_observations`` kernel (``kernels/observations.py``), without its training noise; a test
+``compute_observations`` kernel (``kernels/push/observations.py``), without its training noise; a test
 checks that both agree. This module must not import torch, warp or newton.
 
 Conventions: world frame Z-up, SI units (m, rad, m/s, rad/s), quaternions (x, y, z, w), rotation

@@ -6,7 +6,7 @@ import argparse
 
 
 def _env_info(args: argparse.Namespace) -> int:
-    from dynpush.kernels.observations import POLICY_TERMS, PRIVILEGED_TERMS
+    from dynpush.kernels.push.observations import POLICY_TERMS, PRIVILEGED_TERMS
 
     from .config import PushEnvConfig, SimConfig
     from .push_env import PushEnv

@@ -97,7 +97,7 @@ class RandomizationConfig:
 class ObservationNoiseConfig:
     """Half-widths of the actor's additive uniform noise (paper Table "Observations").
 
-    Field names are the observation terms of ``dynpush.kernels.observations.POLICY_TERMS``.
+    Field names are the observation terms of ``dynpush.kernels.push.observations.POLICY_TERMS``.
     """
 
     ee_to_object_b: float = 0.02

@@ -57,7 +57,7 @@ class EpisodeSpec:
             raise ConfigError(f"episode.arm_q must have {len(arm_default)} entries, got {self.arm_q!r}")
 
     def as_arrays(self, arm_default: np.ndarray) -> dict[str, object]:
-        """Values for ``dynpush.kernels.sampling.EpisodeSpec``, one world."""
+        """Values for ``dynpush.kernels.push.sampling.EpisodeSpec``, one world."""
         dims = (self.dims[0], self.dims[0], self.dims[2]) if self.shape == "cylinder" else self.dims
         return {
             "shape": SHAPES.index(self.shape),

@@ -23,8 +23,14 @@ import numpy as np
 import torch
 import warp as wp
 
-from dynpush.kernels import locomotion as loco
-from dynpush.kernels.constraints import CONSTRAINT_GROUPS
+from dynpush.kernels.locomotion import (
+    actions as loco_actions,
+    constraints as loco_constraints,
+    observations as loco_observations,
+    sampling as loco_sampling,
+    views as loco_views,
+)
+from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
 from dynpush.runtime.actions import ActionScaling
 from dynpush.runtime.locomotion_contract import LocomotionContract
 
@@ -39,7 +45,8 @@ class LocomotionNetwork:
     """A ``locomotion.onnx`` (``dynpush export`` of a locomotion run) run by onnxruntime on all worlds at once.
 
     Its contract is read as the runtime reads it (``dynpush.runtime.locomotion_contract``); the simulator writes
-    the observation of ``kernels/locomotion.py`` (``POLICY_TERMS``, unscaled), so the network must read that one.
+    the observation of ``kernels/locomotion/observations.py`` (``POLICY_TERMS``, unscaled), so the network must read
+    that one.
     """
 
     def __init__(self, path: str):
@@ -47,10 +54,12 @@ class LocomotionNetwork:
 
         model = load_onnx(Path(path))
         self.contract = LocomotionContract.from_metadata(read_metadata(model), path)
-        observation, terms = list(self.contract.observation), [(name, 1.0) for name, _ in loco.POLICY_TERMS]
+        observation = list(self.contract.observation)
+        terms = [(name, 1.0) for name, _ in loco_observations.POLICY_TERMS]
         if observation != terms:
             raise ValueError(f"{path}: observation {observation} differs from the simulator's {terms}")
-        self.session = batched_session(model, "obs", loco.NUM_POLICY_OBS, "actions", loco.NUM_LEG_JOINTS, path)
+        self.session = batched_session(model, "obs", loco_observations.NUM_POLICY_OBS, "actions",
+                                       loco_views.NUM_LEG_JOINTS, path)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         """Leg actions [B, 12] (float32) of the locomotion observations ``obs`` [B, 61] (float32)."""
@@ -89,9 +98,9 @@ class LeggedPushEnv(PushEnv):
                                     scene.robot_qd_count, scene.leg_q, scene.leg_qd, scene.arm_q, scene.arm_qd, scene.shank_body)
         # The push policy's absolute 6D command is the locomotion command.
         self.leg_task = locomotion_task(n, command=self.task.base_command)
-        self.leg_actions = wp.zeros((n, loco.NUM_LEG_JOINTS), dtype=float)
-        self.leg_obs = wp.zeros((n, loco.NUM_POLICY_OBS), dtype=float)
-        self.leg_critic_obs = wp.zeros((n, loco.NUM_CRITIC_OBS), dtype=float)
+        self.leg_actions = wp.zeros((n, loco_views.NUM_LEG_JOINTS), dtype=float)
+        self.leg_obs = wp.zeros((n, loco_observations.NUM_POLICY_OBS), dtype=float)
+        self.leg_critic_obs = wp.zeros((n, loco_observations.NUM_CRITIC_OBS), dtype=float)
         self.leg_actions_t = wp.to_torch(self.leg_actions)
 
     def _make_params(self) -> None:
@@ -108,26 +117,27 @@ class LeggedPushEnv(PushEnv):
             action_scale = contract.action_scale
         # Leg actions -> leg targets [rad]: the parameters of process_leg_actions.
         self.leg_scaling = ActionScaling(legs.leg_default, action_scale)
-        p = loco.LocomotionParams()
+        p = loco_views.LocomotionParams()
         p.leg_default = f32(self.leg_scaling.default)
         p.arm_default = f32(self.scene.robot.arm_default)
         p.action_scale, p.clip = float(self.leg_scaling.scale), self.cfg.actions.clip
         self.leg_params = p
-        lim = loco.LeggedLimits()
+        lim = loco_views.LeggedLimits()
         lim.stiffness, lim.damping, lim.effort_limit = f32(legs.leg_stiffness), f32(legs.leg_damping), f32(legs.leg_effort_limit)
         lim.nominal_torque = f32(np.tile(self.cfg.constraints.leg_nominal_torque, 4))
         self.leg_limits = lim
-        self.noise_free = f32(np.zeros(loco.NUM_POLICY_OBS))
+        self.noise_free = f32(np.zeros(loco_observations.NUM_POLICY_OBS))
 
     def _capture(self) -> None:
         with wp.ScopedCapture() as capture:
             self._process_actions()
-            self._launch(loco.compute_observations, [self.leg_view, self.leg_task, self.leg_params, self.noise_free, 0,
-                                                     self.cfg.seed, self.leg_obs, self.leg_critic_obs])
+            self._launch(loco_observations.compute_observations, [self.leg_view, self.leg_task, self.leg_params,
+                                                                  self.noise_free, 0, self.cfg.seed, self.leg_obs,
+                                                                  self.leg_critic_obs])
         self._graph_actions = capture.graph
         with wp.ScopedCapture() as capture:
-            self._launch(loco.process_leg_actions, [self.leg_actions, self.leg_params, self.leg_view, self.leg_task,
-                                                    self.control.joint_target_q])
+            self._launch(loco_actions.process_leg_actions, [self.leg_actions, self.leg_params, self.leg_view,
+                                                            self.leg_task, self.control.joint_target_q])
             self._physics_and_task()
         self._graph = capture.graph
 
@@ -136,7 +146,8 @@ class LeggedPushEnv(PushEnv):
         """The push task's state, the locomotion task's (its command is the push task's base command) and the
         last leg actions and observation, and MuJoCo's warm start."""
         arrays = super()._state_arrays()
-        arrays |= {f"leg_task.{name}": getattr(self.leg_task, name) for name in loco.LocomotionTask.vars if name != "command"}
+        arrays |= {f"leg_task.{name}": getattr(self.leg_task, name) for name in loco_views.LocomotionTask.vars
+                   if name != "command"}
         arrays["leg_actions"], arrays["leg_obs"] = self.leg_actions, self.leg_obs
         arrays["mujoco.qacc_warmstart"] = self.solver.mjw_data.qacc_warmstart
         return arrays
@@ -146,11 +157,11 @@ class LeggedPushEnv(PushEnv):
         """The legs carry the base: no tracking wrench."""
 
     def _robot_constraints(self) -> None:
-        self._launch(loco.write_leg_torque_constraints, [self.leg_view, self.leg_task, self.leg_limits, self.constraints,
-                                                         LEG_TORQUE_COLUMN])
+        self._launch(loco_constraints.write_leg_torque_constraints, [self.leg_view, self.leg_task, self.leg_limits,
+                                                                     self.constraints, LEG_TORQUE_COLUMN])
 
     def _start_robot_flagged(self) -> None:
-        self._launch(loco.start_legs, [self.reset_flags, self.leg_params, self.leg_view, self.leg_task])
+        self._launch(loco_sampling.start_legs, [self.reset_flags, self.leg_params, self.leg_view, self.leg_task])
 
     def set_leg_targets(self, targets: np.ndarray) -> None:
         """Leg joint targets [rad] (num_envs, 12, ``LEG_JOINT_NAMES`` order) for the next steps, when no locomotion
@@ -158,7 +169,7 @@ class LeggedPushEnv(PushEnv):
         if self.locomotion is not None:
             raise RuntimeError("set_leg_targets: this environment runs its own locomotion policy")
         targets = np.asarray(targets, dtype=np.float32)
-        if targets.shape != (self.num_envs, loco.NUM_LEG_JOINTS) or not np.all(np.isfinite(targets)):
+        if targets.shape != (self.num_envs, loco_views.NUM_LEG_JOINTS) or not np.all(np.isfinite(targets)):
             raise ValueError(f"leg targets must be finite with shape ({self.num_envs}, 12), got {targets.shape}")
         self.leg_actions.assign(self.leg_scaling.actions(targets))
 

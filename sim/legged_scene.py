@@ -15,7 +15,7 @@ import warp as wp
 from pxr import Usd
 
 from dynpush.assets_usd import ARM_JOINT_NAMES, EE_SHAPE, GROUND_USD, LEG_JOINT_NAMES, ROBOT_LEGGED_USD
-from dynpush.kernels import locomotion as loco
+from dynpush.kernels.locomotion import views as loco_views
 
 LEGS = ("LF", "RF", "LH", "RH")
 
@@ -154,11 +154,11 @@ def build_legged_scene(num_worlds: int, device: str) -> LeggedScene:
 
 
 def legged_view(state: newton.State, base_body, base_q_start, base_qd_start, robot_qd_count: int, leg_q, leg_qd, arm_q,
-                arm_qd, shank_body) -> loco.LeggedView:
+                arm_qd, shank_body) -> loco_views.LeggedView:
     """The kernels' view of the legged robots in ``state`` from per-world index arrays (numpy)."""
     i32 = lambda a: wp.array(np.asarray(a, dtype=np.int32), dtype=int)  # noqa: E731
     i32_2d = lambda a: wp.array2d(np.asarray(a, dtype=np.int32), dtype=int)  # noqa: E731
-    view = loco.LeggedView()
+    view = loco_views.LeggedView()
     view.body_q, view.body_qd, view.joint_q, view.joint_qd = state.body_q, state.body_qd, state.joint_q, state.joint_qd
     view.base_body, view.base_q_start, view.base_qd_start = i32(base_body), i32(base_q_start), i32(base_qd_start)
     view.robot_qd_count = robot_qd_count
@@ -167,17 +167,17 @@ def legged_view(state: newton.State, base_body, base_q_start, base_qd_start, rob
     return view
 
 
-def locomotion_task(num_worlds: int, command: wp.array2d | None = None) -> loco.LocomotionTask:
+def locomotion_task(num_worlds: int, command: wp.array2d | None = None) -> loco_views.LocomotionTask:
     """Zeroed locomotion task buffers; ``command`` (num_worlds, 6) is used as the command buffer if given."""
     n = num_worlds
-    task = loco.LocomotionTask()
-    task.command = command if command is not None else wp.zeros((n, loco.NUM_COMMANDS), dtype=float)
-    for name, width in (("actions", loco.NUM_LEG_JOINTS), ("last_actions", loco.NUM_LEG_JOINTS),
-                        ("leg_target", loco.NUM_LEG_JOINTS), ("leg_velocity_last", loco.NUM_LEG_JOINTS),
-                        ("arm_target", loco.NUM_ARM_JOINTS + 1), ("foot_air_time", loco.NUM_FEET),
-                        ("touchdown_air_time", loco.NUM_FEET), ("ee_force_h", 3)):
+    task = loco_views.LocomotionTask()
+    task.command = command if command is not None else wp.zeros((n, loco_views.NUM_COMMANDS), dtype=float)
+    for name, width in (("actions", loco_views.NUM_LEG_JOINTS), ("last_actions", loco_views.NUM_LEG_JOINTS),
+                        ("leg_target", loco_views.NUM_LEG_JOINTS), ("leg_velocity_last", loco_views.NUM_LEG_JOINTS),
+                        ("arm_target", loco_views.NUM_ARM_JOINTS + 1), ("foot_air_time", loco_views.NUM_FEET),
+                        ("touchdown_air_time", loco_views.NUM_FEET), ("ee_force_h", 3)):
         setattr(task, name, wp.zeros((n, width), dtype=float))
-    task.foot_contact = wp.zeros((n, loco.NUM_FEET), dtype=int)
+    task.foot_contact = wp.zeros((n, loco_views.NUM_FEET), dtype=int)
     task.base_mass_offset = wp.zeros(n, dtype=float)
     for name in ("episode_step", "next_command_step", "next_arm_step", "next_push_step", "next_ee_force_step", "rng_counter"):
         setattr(task, name, wp.zeros(n, dtype=int))

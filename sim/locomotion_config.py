@@ -147,7 +147,7 @@ class LocomotionConstraintConfig:
 @dataclass
 class LocomotionNoiseConfig:
     """Half-widths of the actor's additive uniform observation noise (legged_gym's, scale 1; ours for the arm
-    as the push task's). Field names are the terms of ``dynpush.kernels.locomotion.POLICY_TERMS``; the
+    as the push task's). Field names are the terms of ``dynpush.kernels.locomotion.observations.POLICY_TERMS``; the
     command and the last actions are noise-free."""
 
     base_linear_velocity_b: float = 0.1

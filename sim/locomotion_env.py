@@ -18,7 +18,16 @@ from newton.sensors import SensorContact
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
-from dynpush.kernels import locomotion as k
+from dynpush.kernels.locomotion import (
+    actions as actions_k,
+    constraints as constraints_k,
+    contacts as contacts_k,
+    observations as observations_k,
+    rewards as rewards_k,
+    sampling as sampling_k,
+    terminations as terminations_k,
+    views as views_k,
+)
 from dynpush.runtime.actions import BASE_COMMAND_NAMES
 
 from .config import ConfigError
@@ -28,8 +37,8 @@ from .locomotion_config import LocomotionEnvConfig
 
 wp.config.enable_backward = False
 
-CONSTRAINT_GROUPS = k.CONSTRAINT_GROUPS
-REWARD_TERMS = k.REWARD_TERMS
+CONSTRAINT_GROUPS = constraints_k.CONSTRAINT_GROUPS
+REWARD_TERMS = rewards_k.REWARD_TERMS
 COMMAND_NAMES = BASE_COMMAND_NAMES  # the locomotion command is the push policy's base command
 
 
@@ -41,7 +50,7 @@ class LocomotionEnv(EnvBase, VecEnv):
     def __init__(self, cfg: LocomotionEnvConfig):
         self.cfg = cfg.validate()
         self.num_envs = cfg.num_envs
-        self.num_actions = k.NUM_LEG_JOINTS
+        self.num_actions = views_k.NUM_LEG_JOINTS
         self.max_episode_length = cfg.max_episode_steps
         self.device = cfg.device
         self.wp_device = wp.get_device(cfg.device)
@@ -83,14 +92,14 @@ class LocomotionEnv(EnvBase, VecEnv):
                                 scene.leg_q, scene.leg_qd, scene.arm_q, scene.arm_qd, scene.shank_body)
 
         self.ee_body = wp.array(np.asarray(scene.ee_body, dtype=np.int32), dtype=int)
-        self.raw_actions = wp.zeros((n, k.NUM_LEG_JOINTS), dtype=float)
-        self.policy_obs = wp.zeros((n, k.NUM_POLICY_OBS), dtype=float)
-        self.critic_obs = wp.zeros((n, k.NUM_CRITIC_OBS), dtype=float)
+        self.raw_actions = wp.zeros((n, views_k.NUM_LEG_JOINTS), dtype=float)
+        self.policy_obs = wp.zeros((n, observations_k.NUM_POLICY_OBS), dtype=float)
+        self.critic_obs = wp.zeros((n, observations_k.NUM_CRITIC_OBS), dtype=float)
         self.reward = wp.zeros(n, dtype=float)
         self.reward_terms = wp.zeros((n, len(REWARD_TERMS)), dtype=float)
-        self.tracking_error = wp.zeros((n, k.NUM_COMMANDS), dtype=float)
-        self.constraints = wp.zeros((n, k.NUM_CONSTRAINTS), dtype=float)
-        self.foot_force = wp.zeros((n, k.NUM_FEET), dtype=float)  # [N]
+        self.tracking_error = wp.zeros((n, views_k.NUM_COMMANDS), dtype=float)
+        self.constraints = wp.zeros((n, constraints_k.NUM_CONSTRAINTS), dtype=float)
+        self.foot_force = wp.zeros((n, views_k.NUM_FEET), dtype=float)  # [N]
         self.reset_flags = wp.zeros(n, dtype=int)
         self.time_out = wp.zeros(n, dtype=int)
         self.articulation_mask = wp.zeros(self.scene.model.articulation_count, dtype=bool)
@@ -110,7 +119,7 @@ class LocomotionEnv(EnvBase, VecEnv):
         f32 = lambda a: wp.array(np.asarray(a, dtype=np.float32), dtype=float)  # noqa: E731
         steps = lambda pair: wp.vec2(pair[0] / cfg.control_dt, pair[1] / cfg.control_dt)  # noqa: E731
         rnd = cfg.randomization
-        p = k.LocomotionParams()
+        p = views_k.LocomotionParams()
         p.leg_default = f32(robot.leg_default)
         p.arm_default, p.arm_lower, p.arm_upper = f32(robot.arm_default), f32(robot.arm_lower), f32(robot.arm_upper)
         p.action_scale, p.clip = cfg.action_scale, cfg.action_clip
@@ -130,7 +139,7 @@ class LocomotionEnv(EnvBase, VecEnv):
         self.params = p
 
         c = cfg.constraints
-        lim = k.LeggedLimits()
+        lim = views_k.LeggedLimits()
         lim.stiffness, lim.damping = f32(robot.leg_stiffness), f32(robot.leg_damping)
         lim.effort_limit = f32(robot.leg_effort_limit)
         lim.nominal_torque = f32(np.tile(c.leg_nominal_torque, 4))
@@ -154,7 +163,7 @@ class LocomotionEnv(EnvBase, VecEnv):
         self.limits = lim
 
         r = cfg.rewards
-        rp = k.LocomotionRewardParams()
+        rp = rewards_k.LocomotionRewardParams()
         rp.sigma_linear_velocity, rp.sigma_yaw_rate = r.sigma_linear_velocity, r.sigma_yaw_rate
         rp.sigma_attitude, rp.sigma_height = r.sigma_attitude, r.sigma_height
         rp.air_time_target, rp.moving_command = r.air_time_target, r.moving_command
@@ -163,7 +172,7 @@ class LocomotionEnv(EnvBase, VecEnv):
         self._reward_weights = rp.weights
 
         scales = []
-        for name, size in k.POLICY_TERMS:
+        for name, size in observations_k.POLICY_TERMS:
             scales += [cfg.noise.half_width(name)] * size
         self.noise_scale = f32(scales)
 
@@ -180,10 +189,11 @@ class LocomotionEnv(EnvBase, VecEnv):
 
     def _step_kernels(self) -> None:
         cfg = self.cfg
-        self._launch(k.process_leg_actions, [self.raw_actions, self.params, self.view, self.task, self.control.joint_target_q])
-        self._launch(k.write_arm_targets, [self.view, self.task, self.control.joint_target_q])
-        self._launch(k.write_ee_force, [self.view, self.task, self.ee_body, wp.vec3(*self.scene.ee_offset),
-                                        self.scene.model.body_com, self.state_0.body_f, self.state_1.body_f])
+        self._launch(actions_k.process_leg_actions, [self.raw_actions, self.params, self.view, self.task,
+                                                     self.control.joint_target_q])
+        self._launch(actions_k.write_arm_targets, [self.view, self.task, self.control.joint_target_q])
+        self._launch(actions_k.write_ee_force, [self.view, self.task, self.ee_body, wp.vec3(*self.scene.ee_offset),
+                                                self.scene.model.body_com, self.state_0.body_f, self.state_1.body_f])
         dt = cfg.control_dt / cfg.substeps
         for sub in range(cfg.substeps):
             state_in, state_out = (self.state_0, self.state_1) if sub % 2 == 0 else (self.state_1, self.state_0)
@@ -193,21 +203,23 @@ class LocomotionEnv(EnvBase, VecEnv):
         if cfg.substeps % 2:  # the view reads state_0
             for name in ("body_q", "body_qd", "joint_q", "joint_qd"):
                 getattr(self.state_0, name).assign(getattr(self.state_1, name))
-        self._launch(k.update_feet, [self.view, self.limits, self.task])
-        self._launch(k.compute_rewards, [self.view, self.task, self.reward_params, self.reward, self.reward_terms,
-                                         self.tracking_error])
+        self._launch(contacts_k.update_feet, [self.view, self.limits, self.task])
+        self._launch(rewards_k.compute_rewards, [self.view, self.task, self.reward_params, self.reward, self.reward_terms,
+                                                 self.tracking_error])
         self.foot_sensor.update(None, self.contacts, observables=self.solver_observables)
-        self._launch(k.gather_foot_forces, [self.foot_sensor.total_force, self.foot_force])
-        self._launch(k.compute_constraints, [self.view, self.task, self.limits, self.foot_force, self.constraints])
-        self._launch(k.compute_terminations, [self.view, self.task, self.limits, self.reset_flags, self.time_out])
+        self._launch(contacts_k.gather_foot_forces, [self.foot_sensor.total_force, self.foot_force])
+        self._launch(constraints_k.compute_constraints, [self.view, self.task, self.limits, self.foot_force,
+                                                         self.constraints])
+        self._launch(terminations_k.compute_terminations, [self.view, self.task, self.limits, self.reset_flags,
+                                                           self.time_out])
         self._start_flagged()
-        self._launch(k.apply_events, [cfg.seed, self.params, self.view, self.task])
+        self._launch(sampling_k.apply_events, [cfg.seed, self.params, self.view, self.task])
         self._observe()
 
     def _start_flagged(self) -> None:
         """New episodes in the worlds with ``reset_flags != 0`` (inside the captured step)."""
         model = self.scene.model
-        self._launch(k.start_episodes, [self.reset_flags, self.cfg.seed, self.params, self.view, self.task])
+        self._launch(sampling_k.start_episodes, [self.reset_flags, self.cfg.seed, self.params, self.view, self.task])
         wp.launch(articulation_reset_mask, dim=model.articulation_count,
                   inputs=[self.reset_flags, model.articulation_world, self.articulation_mask], device=self.wp_device)
         newton.eval_fk(model, self.state_0.joint_q, self.state_0.joint_qd, self.state_0, mask=self.articulation_mask)
@@ -227,8 +239,9 @@ class LocomotionEnv(EnvBase, VecEnv):
         self.solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
 
     def _observe(self) -> None:
-        self._launch(k.compute_observations, [self.view, self.task, self.params, self.noise_scale,
-                                              int(self.cfg.noise.enabled), self.cfg.seed, self.policy_obs, self.critic_obs])
+        self._launch(observations_k.compute_observations, [self.view, self.task, self.params, self.noise_scale,
+                                                           int(self.cfg.noise.enabled), self.cfg.seed, self.policy_obs,
+                                                           self.critic_obs])
 
     # ------------------------------------------------------------------ VecEnv
     def reset(self, randomize_episode_step: bool = False) -> TensorDict:
@@ -255,7 +268,7 @@ class LocomotionEnv(EnvBase, VecEnv):
         """Gives every world the 6D command ``commands`` (num_envs, 6), now; with ``hold`` it is not resampled
         for the rest of the episode (evaluation). Returns the observations."""
         commands = np.asarray(commands, dtype=np.float32)
-        if commands.shape != (self.num_envs, k.NUM_COMMANDS) or not np.all(np.isfinite(commands)):
+        if commands.shape != (self.num_envs, views_k.NUM_COMMANDS) or not np.all(np.isfinite(commands)):
             raise ValueError(f"commands must be finite with shape ({self.num_envs}, 6), got {commands.shape}")
         with wp.ScopedDevice(self.wp_device):
             self.task.command.assign(commands)
@@ -279,7 +292,7 @@ class LocomotionEnv(EnvBase, VecEnv):
 
     # ------------------------------------------------------------------ checkpointing
     def _state_arrays(self) -> dict[str, wp.array]:
-        arrays = {f"task.{name}": getattr(self.task, name) for name in k.LocomotionTask.vars}
+        arrays = {f"task.{name}": getattr(self.task, name) for name in views_k.LocomotionTask.vars}
         for name in ("body_q", "body_qd", "joint_q", "joint_qd"):
             arrays[f"state.{name}"] = getattr(self.state_0, name)
         arrays["control.joint_target_q"] = self.control.joint_target_q

@@ -19,7 +19,7 @@ import warp as wp
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
-from dynpush.kernels import (
+from dynpush.kernels.push import (
     actions as actions_k,
     base_tracking,
     constraints as constraints_k,
@@ -29,7 +29,7 @@ from dynpush.kernels import (
     sampling,
     terminations,
 )
-from dynpush.kernels.views import CONTACT_COLUMNS, NUM_ACTIONS, NUM_ARM_JOINTS, NUM_CRITIC_OBS, NUM_POLICY_OBS, PushTask, RobotView
+from dynpush.kernels.push.views import CONTACT_COLUMNS, NUM_ACTIONS, NUM_ARM_JOINTS, NUM_CRITIC_OBS, NUM_POLICY_OBS, PushTask, RobotView
 from dynpush.runtime.actions import ActionMapping, ActionScaling
 
 from .config import ConfigError, PushEnvConfig
@@ -535,7 +535,7 @@ class PushEnv(EnvBase, VecEnv):
 
     def set_goal_difficulty(self, difficulty: float) -> None:
         """Scales the yaw change the goal of episodes drawn from now on asks for (a training
-        curriculum; ``kernels/sampling.py``). 1 is the paper's task."""
+        curriculum; ``kernels/push/sampling.py``). 1 is the paper's task."""
         if not 0.0 <= difficulty <= 1.0:
             raise ConfigError(f"goal difficulty must lie in [0, 1], got {difficulty!r}")
         self.goal_difficulty.fill_(difficulty)
@@ -547,7 +547,7 @@ class PushEnv(EnvBase, VecEnv):
     def set_near_goal_starts(self, share: float, radius: float, max_yaw: float) -> None:
         """Episodes drawn from now on start near their goal with probability ``share``: the goal uniform (by area)
         within ``radius`` [m] of the object's start, its yaw the object's plus U(-``max_yaw``, ``max_yaw``) [rad]
-        (a training-only start-state curriculum; ``kernels/sampling.py``). Share 0 is the paper's task."""
+        (a training-only start-state curriculum; ``kernels/push/sampling.py``). Share 0 is the paper's task."""
         if not (0.0 <= share <= 1.0 and radius >= 0.0 and max_yaw >= 0.0):
             raise ConfigError(f"near-goal starts need share in [0, 1], radius >= 0, max_yaw >= 0; got {share!r},"
                               f" {radius!r}, {max_yaw!r}")

@@ -18,7 +18,7 @@ from pxr import Usd
 from dynpush.assets_usd import (
     ARM_JOINT_NAMES, ARM_LINK_NAMES, CUBOID_USD, CYLINDER_USD, EE_SHAPE, GROUND_USD, LEG_JOINT_NAMES, LEG_SHAPE_NAMES, ROBOT_USD,
 )
-from dynpush.kernels.contacts import ROLE_EE, ROLE_NONE, ROLE_OBJECT, ROLE_ROBOT
+from dynpush.kernels.push.contacts import ROLE_EE, ROLE_NONE, ROLE_OBJECT, ROLE_ROBOT
 
 from .leg_statics import leg_torque_map
 from .legged_scene import LEGS, LeggedRobotDescription, legged_robot_builder

@@ -10,9 +10,9 @@ import numpy as np
 import torch
 import warp as wp
 
-from dynpush.kernels import actions as actions_k
-from dynpush.kernels import locomotion as loco
-from dynpush.kernels.views import PushTask, RobotView
+from dynpush.kernels.push import actions as actions_k
+from dynpush.kernels.locomotion import actions as loco_actions, views as loco_views
+from dynpush.kernels.push.views import PushTask, RobotView
 from dynpush.runtime.actions import NUM_BASE_COMMANDS, ActionMapping, ActionScaling
 from dynpush.runtime.observation import NUM_ACTIONS, NUM_ARM_JOINTS
 from test_locomotion_kernels import loco_params, random_scene, structs
@@ -69,9 +69,9 @@ def test_process_leg_actions_equals_the_runtime_leg_scaling():
     view_np, task_np = random_scene(rng, n)
     params, p = loco_params(rng)
     legs = ActionScaling(p["leg_default"], p["action_scale"])
-    raw = rng.uniform(-p["clip"], p["clip"], (n, loco.NUM_LEG_JOINTS)).astype(np.float32)
+    raw = rng.uniform(-p["clip"], p["clip"], (n, loco_views.NUM_LEG_JOINTS)).astype(np.float32)
     view, task = structs(view_np, task_np)
-    launch(loco.process_leg_actions, n, arr(raw), params, view, task, arr(np.zeros(view_np["joint_q"].size)))
+    launch(loco_actions.process_leg_actions, n, arr(raw), params, view, task, arr(np.zeros(view_np["joint_q"].size)))
     close(task.leg_target.numpy(), legs.targets(raw), rtol=1e-6, atol=1e-6)
     close(legs.actions(task.leg_target.numpy()), raw, rtol=1e-5, atol=1e-5)
 

@@ -149,7 +149,7 @@ def test_returns_to_go_of_hand_made_episodes():
 def test_constraint_violation_is_the_mean_over_episodes_of_each_ones_share_of_time():
     """Table II: a group violated 10 of 100 steps in one episode and never in a 50-step one is violated 5 % of the time
     (the mean of the episodes' shares, not 10 of 150 pooled steps)."""
-    from dynpush.kernels.constraints import CONSTRAINT_GROUPS
+    from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
     from dynpush.policies.tables import ConstraintObserver
 
     groups = len(CONSTRAINT_GROUPS)

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 import warp as wp
 
-from dynpush.kernels import actions, base_tracking, constraints, contacts, keypoints, rewards, sampling, terminations
-from dynpush.kernels.views import CONTACT_COLUMNS, EE_CONTACT, NUM_COLLISIONS, PushTask, RobotView
+from dynpush.kernels.push import actions, base_tracking, constraints, contacts, keypoints, rewards, sampling, terminations
+from dynpush.kernels.push.views import CONTACT_COLUMNS, EE_CONTACT, NUM_COLLISIONS, PushTask, RobotView
 from warp_numpy_helpers import (DEVICE, arr, as_f32, axis_angle_quat, close, launch, make_struct, quat_matrix, quat_mul,
                                 quat_rotate, quat_rotate_inv, random_quat)
 

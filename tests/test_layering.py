@@ -3,7 +3,7 @@
 Layers, lowest first: ``assets_usd`` -> ``kernels`` -> ``sim`` -> ``policies`` -> ``dynpush`` (the CLI). A module
 may import its own layer or a lower one, never a higher one. ``runtime`` stands apart: it depends on numpy and
 onnxruntime only, never on kernels, sim or policies, nor on torch, warp or newton; the layers may take pure
-layout constants from its light modules (``kernels/observations.py`` reads ``runtime/observation.py``).
+layout constants from its light modules (``kernels/push/observations.py`` reads ``runtime/observation.py``).
 No module imports a private (leading underscore) name from another module, and the imports that run form no cycle:
 neither those at module level nor those inside functions (a deferred import that closes a circle is a module-level
 one waiting for a caller; the shared code belongs in the lower module). Imports under ``if TYPE_CHECKING:`` never
@@ -51,11 +51,14 @@ def _modules() -> dict[str, Path]:
     out: dict[str, Path] = {}
     for package, folder in PACKAGES.items():
         base = ROOT / folder
-        for path in sorted(base.glob("*.py")):
+        for path in sorted(base.rglob("*.py")):
             if package == "dynpush" and path.parent != ROOT / "dynpush":
                 continue
-            name = package if path.stem == "__init__" else f"{package}.{path.stem}"
-            out[name] = path
+            # A subfolder is a subpackage (``kernels/push/``, ``kernels/locomotion/``).
+            parts = path.relative_to(base).with_suffix("").parts
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            out[".".join((package, *parts))] = path
     out["dynpush.shipped"] = ROOT / "dynpush" / "shipped" / "__init__.py"
     return out
 
@@ -130,7 +133,8 @@ def _internal(target: str) -> str | None:
 
 
 def test_the_modules_are_found():
-    assert "dynpush.cli" in MODULES and "dynpush.runtime.app" in MODULES and "dynpush.kernels.views" in MODULES
+    assert "dynpush.cli" in MODULES and "dynpush.runtime.app" in MODULES and "dynpush.kernels.push.views" in MODULES
+    assert "dynpush.kernels.locomotion.views" in MODULES and "dynpush.kernels.frames" in MODULES
 
 
 def test_base_modules_import_only_each_other():

@@ -11,7 +11,11 @@ import torch
 
 from dynpush.assets_usd import LEG_JOINT_NAMES
 from dynpush.cli import main
-from dynpush.kernels import locomotion as loco
+from dynpush.kernels.locomotion import (
+    constraints as loco_constraints,
+    observations as loco_observations,
+    views as loco_views,
+)
 from dynpush.policies.actor import load_actor
 from dynpush.policies.export import load_run_config
 from dynpush.policies.locomotion_export import export_locomotion
@@ -56,7 +60,7 @@ def test_locomotion_onnx_equals_the_actor_and_carries_its_contract(locomotion_ru
     run, path = locomotion_run
     cfg = load_run_config(run)
     assert isinstance(cfg, LocomotionTrainConfig) and (run / "model_1.pt").exists()
-    actor = load_actor(run / "model_1.pt", cfg, loco.NUM_POLICY_OBS, loco.NUM_LEG_JOINTS)
+    actor = load_actor(run / "model_1.pt", cfg, loco_observations.NUM_POLICY_OBS, loco_views.NUM_LEG_JOINTS)
     assert int(actor.obs_normalizer.count) > 0
     obs = observations(actor, 16, seed=2)
     contract_ = LocomotionContract.read(str(path))
@@ -65,7 +69,7 @@ def test_locomotion_onnx_equals_the_actor_and_carries_its_contract(locomotion_ru
     for o, expected in zip(obs, torch_actions(actor, obs)):
         runtime.model.input[0] = o
         assert np.abs(runtime.model.run() - expected).max() < 1e-5
-    assert [t.name for t in section.observation] == [name for name, _ in loco.POLICY_TERMS]
+    assert [t.name for t in section.observation] == [name for name, _ in loco_observations.POLICY_TERMS]
     assert section.joint_names == list(LEG_JOINT_NAMES) and section.action_scale == cfg.env.action_scale
     assert contract_.values["command_lower"] == list(cfg.env.commands.lower) and len(contract_.joint_lower) == 12
 
@@ -104,7 +108,7 @@ def test_runtime_observation_equals_the_warp_kernel(locomotion_run, robot_contra
         runtime.last_actions = env.task.actions.numpy()[w].astype(np.float64)
         runtime.step(state, env.task.command.numpy()[w].astype(np.float64))
         start = 0
-        for name, size in loco.POLICY_TERMS:
+        for name, size in loco_observations.POLICY_TERMS:
             np.testing.assert_allclose(runtime.model.input[0, start:start + size], env.policy_obs_t[w, start:start + size].numpy(),
                                        rtol=1e-5, atol=1e-5, err_msg=f"world {w}: {name}")
             start += size
@@ -128,7 +132,7 @@ def test_locomotion_env_state_round_trip():
     again = [env.step(a)[0]["critic"].clone() for a in actions[5:]]
     for a, b in zip(first, again):
         torch.testing.assert_close(a, b)
-    assert env.constraints_t.shape == (4, loco.NUM_CONSTRAINTS)
+    assert env.constraints_t.shape == (4, loco_constraints.NUM_CONSTRAINTS)
     with pytest.raises(ValueError, match="same num_envs"):
         env.load_state_dict({**saved, "task.command": np.zeros((5, 6), np.float32)})
     with pytest.raises(ConfigError, match=r"disturbance scale must lie in \[0, 1\], got 1.5"):

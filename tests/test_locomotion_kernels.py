@@ -12,7 +12,16 @@ import numpy as np
 import pytest
 import warp as wp
 
-from dynpush.kernels import locomotion as k
+from dynpush.kernels.locomotion import (
+    actions as actions_k,
+    constraints as constraints_k,
+    contacts as contacts_k,
+    observations as observations_k,
+    rewards as rewards_k,
+    sampling as sampling_k,
+    terminations as terminations_k,
+    views as views_k,
+)
 from warp_numpy_helpers import (DEVICE, arr, as_f32, axis_angle_quat, close, launch, make_struct, quat_matrix, quat_mul,
                                 quat_rotate, quat_rotate_inv, random_quat)
 
@@ -81,7 +90,7 @@ def random_scene(rng, n):
 
 
 def structs(view, task):
-    return make_struct(k.LeggedView, **view), make_struct(k.LocomotionTask, **task)
+    return make_struct(views_k.LeggedView, **view), make_struct(views_k.LocomotionTask, **task)
 
 
 def read(cls, s):
@@ -100,17 +109,17 @@ def loco_params(rng, **overrides):
         ee_force_probability=0.6, ee_force_max=80.0, ee_force_spread=0.7,
     )
     values.update(overrides)
-    return make_struct(k.LocomotionParams, **values), as_f32({n: np.asarray(v) for n, v in values.items()})
+    return make_struct(views_k.LocomotionParams, **values), as_f32({n: np.asarray(v) for n, v in values.items()})
 
 
 def limits_struct(**values):
     base = dict(contact_margin=0.02, control_dt=DT, foot_radius=0.03, foot_offset=(0.02, -0.01, -0.3))
     base.update(values)
-    return make_struct(k.LeggedLimits, **base)
+    return make_struct(views_k.LeggedLimits, **base)
 
 
 def test_layout_constants():
-    assert (k.NUM_POLICY_OBS, k.NUM_CRITIC_OBS, k.NUM_CONSTRAINTS) == (61, 67, 61)
+    assert (observations_k.NUM_POLICY_OBS, observations_k.NUM_CRITIC_OBS, constraints_k.NUM_CONSTRAINTS) == (61, 67, 61)
 
 
 # --------------------------------------------------------------------------- actions
@@ -124,11 +133,11 @@ def test_process_leg_actions_and_arm_targets():
     target0 = rng.normal(size=n * NQ).astype(np.float32)
     view, task = structs(view_np, task_np)
     joint_target_q = arr(target0)
-    launch(k.process_leg_actions, n, arr(raw), params, view, task, joint_target_q)
+    launch(actions_k.process_leg_actions, n, arr(raw), params, view, task, joint_target_q)
     legs_only = target0.astype(np.float64)
     legs_only[view_np["leg_q"]] = p["leg_default"] + f32(0.4) * np.clip(np.where(np.isfinite(raw), raw, 0.0), -2.5, 2.5)
     close(joint_target_q.numpy(), legs_only, rtol=1e-6, atol=1e-6, err_msg="process_leg_actions writes leg targets only")
-    launch(k.write_arm_targets, n, view, task, joint_target_q)
+    launch(actions_k.write_arm_targets, n, view, task, joint_target_q)
 
     a = np.clip(np.where(np.isfinite(raw), raw, 0.0), -2.5, 2.5)
     assert (np.abs(raw[np.isfinite(raw)]) > 2.5).any() and (np.abs(raw) < 2.5).any()
@@ -155,7 +164,8 @@ def test_write_ee_force():
     body_f = [f32(rng.normal(size=(n * NB, 6))) for _ in range(2)]
     view, task = structs(view_np, task_np)
     out = [arr(f, wp.spatial_vector) for f in body_f]
-    launch(k.write_ee_force, n, view, task, arr(ee_body, int), wp.vec3(*ee_offset), arr(body_com, wp.vec3), *out)
+    launch(actions_k.write_ee_force, n, view, task, arr(ee_body, int), wp.vec3(*ee_offset), arr(body_com, wp.vec3),
+           *out)
 
     q = view_np["body_q"]
     x_base = quat_matrix(q[view_np["base_body"], 3:])[:, :, 0]
@@ -189,7 +199,8 @@ def test_update_feet():
     task_np["foot_air_time"] = np.where(was_down, 0.0, rng.uniform(0.0, 0.6, (n, 4)))
     view_np, task_np = as_f32(view_np), as_f32(task_np)
     view, task = structs(view_np, task_np)
-    launch(k.update_feet, n, view, limits_struct(contact_margin=margin, foot_radius=radius, foot_offset=tuple(offset)), task)
+    limits = limits_struct(contact_margin=margin, foot_radius=radius, foot_offset=tuple(offset))
+    launch(contacts_k.update_feet, n, view, limits, task)
 
     air = np.float32(task_np["foot_air_time"]) + np.float32(DT)  # float32 sum, as the kernel
     np.testing.assert_array_equal(task.foot_contact.numpy(), is_down.astype(int))
@@ -212,13 +223,14 @@ def test_compute_rewards():
     task_np["command"][: n // 4, :3] = 0.0  # standing commands collect no stepping reward
     air = rng.uniform(0.0, 1.0, (n, 4)).astype(np.float32)
     task_np["touchdown_air_time"] = np.where(rng.uniform(size=(n, 4)) < 0.3, air, -1.0).astype(np.float32)
-    prm = make_struct(k.LocomotionRewardParams, weights=rng.uniform(0.5, 2.0, k.NUM_REWARD_TERMS))
+    prm = make_struct(rewards_k.LocomotionRewardParams, weights=rng.uniform(0.5, 2.0, rewards_k.NUM_REWARD_TERMS))
     prm.sigma_linear_velocity, prm.sigma_yaw_rate, prm.sigma_attitude, prm.sigma_height = sig
     prm.air_time_target, prm.moving_command = 0.5, 0.1
     view, task = structs(view_np, task_np)
-    reward, terms = wp.zeros(n, dtype=float, device=DEVICE), wp.zeros((n, k.NUM_REWARD_TERMS), dtype=float, device=DEVICE)
+    reward = wp.zeros(n, dtype=float, device=DEVICE)
+    terms = wp.zeros((n, rewards_k.NUM_REWARD_TERMS), dtype=float, device=DEVICE)
     error = wp.zeros((n, 6), dtype=float, device=DEVICE)
-    launch(k.compute_rewards, n, view, task, prm, reward, terms, error)
+    launch(rewards_k.compute_rewards, n, view, task, prm, reward, terms, error)
 
     x_b, qd_b, u = view_np["body_q"][base], view_np["body_qd"][base], task_np["command"]
     v_h, roll, pitch = heading(x_b[:, 3:], qd_b[:, :3])
@@ -259,9 +271,9 @@ def test_compute_constraints():
     limits = limits_struct(**lim)
     lim = as_f32({n: np.asarray(v) for n, v in lim.items()})
     view, task = structs(view_np, task_np)
-    out = wp.zeros((n, k.NUM_CONSTRAINTS), dtype=float, device=DEVICE)
+    out = wp.zeros((n, constraints_k.NUM_CONSTRAINTS), dtype=float, device=DEVICE)
     foot_force = f32(rng.uniform(0.0, 600.0, (n, 4)))
-    launch(k.compute_constraints, n, view, task, limits, arr(foot_force), out)
+    launch(constraints_k.compute_constraints, n, view, task, limits, arr(foot_force), out)
 
     q, qd = view_np["joint_q"][view_np["leg_q"]], view_np["joint_qd"][view_np["leg_qd"]]
     tau_pd = lim["stiffness"] * (task_np["leg_target"] - q) - lim["damping"] * qd
@@ -281,7 +293,7 @@ def test_compute_constraints():
         "foot_air_time": np.where(touchdown >= 0, 0.25 - touchdown, 0.0),
         "foot_contact_force": foot_force - 300.0,
     }
-    assert [(name, g.shape[1]) for name, g in groups.items()] == list(k.CONSTRAINT_GROUPS)
+    assert [(name, g.shape[1]) for name, g in groups.items()] == list(constraints_k.CONSTRAINT_GROUPS)
     assert (tau_pd > lim["effort_limit"]).any() and (tau_pd < -lim["effort_limit"]).any(), "both clip sides"
     assert (np.abs(tau_pd) > lim["nominal_torque"]).any() and (knee < end).any() and (end < knee).any()
     actual, start = out.numpy(), 0
@@ -299,7 +311,7 @@ def test_gather_foot_forces():
     n = 64
     total = f32(rng.normal(0.0, 150.0, (n * 4, 3)))
     out = wp.zeros((n, 4), dtype=float, device=DEVICE)
-    launch(k.gather_foot_forces, n, wp.array(total, dtype=wp.vec3, device=DEVICE), out)
+    launch(contacts_k.gather_foot_forces, n, wp.array(total, dtype=wp.vec3, device=DEVICE), out)
     close(out.numpy(), np.linalg.norm(total, axis=1).reshape(n, 4), rtol=1e-5)
 
 
@@ -316,7 +328,7 @@ def test_compute_terminations():
     view, task = structs(view_np, task_np)
     limits = limits_struct(base_tilt=max_tilt, base_min_height=min_height, max_episode_steps=max_steps)
     reset, time_out = wp.zeros(n, dtype=int, device=DEVICE), wp.zeros(n, dtype=int, device=DEVICE)
-    launch(k.compute_terminations, n, view, task, limits, reset, time_out)
+    launch(terminations_k.compute_terminations, n, view, task, limits, reset, time_out)
 
     step = task_np["episode_step"] + 1
     tilt = np.arccos(np.clip(quat_rotate(view_np["body_q"][base, 3:], EZ)[:, 2], -1, 1))
@@ -338,7 +350,7 @@ def test_compute_observations():
     view_np["body_q"][view_np["base_body"][::2], 3:] = random_quat(rng, n // 2)
     view_np = as_f32(view_np)
     params, p = loco_params(rng)
-    scale = f32(rng.uniform(0.01, 0.2, k.NUM_POLICY_OBS))
+    scale = f32(rng.uniform(0.01, 0.2, observations_k.NUM_POLICY_OBS))
     scale[::7] = 0.0
     x_b, qd_b = view_np["body_q"][view_np["base_body"]], view_np["body_qd"][view_np["base_body"]]
     jq, jqd = view_np["joint_q"], view_np["joint_qd"]
@@ -348,15 +360,15 @@ def test_compute_observations():
         jqd[view_np["leg_qd"]], task_np["actions"], jq[view_np["arm_q"][:, :5]] - p["arm_default"][:5],
         jqd[view_np["arm_qd"][:, :5]], x_b[:, 2], task_np["foot_contact"], task_np["base_mass_offset"],
     ])
-    assert ref.shape[1] == k.NUM_CRITIC_OBS
+    assert ref.shape[1] == observations_k.NUM_CRITIC_OBS
     policies = []
     for noise in (0, 1):
         view, task = structs(view_np, task_np)
-        policy = wp.zeros((n, k.NUM_POLICY_OBS), dtype=float, device=DEVICE)
-        critic = wp.zeros((n, k.NUM_CRITIC_OBS), dtype=float, device=DEVICE)
-        launch(k.compute_observations, n, view, task, params, arr(scale), noise, 7, policy, critic)
+        policy = wp.zeros((n, observations_k.NUM_POLICY_OBS), dtype=float, device=DEVICE)
+        critic = wp.zeros((n, observations_k.NUM_CRITIC_OBS), dtype=float, device=DEVICE)
+        launch(observations_k.compute_observations, n, view, task, params, arr(scale), noise, 7, policy, critic)
         close(critic.numpy(), ref, rtol=1e-5, atol=1e-5, err_msg=f"critic observation (noise {noise})")
-        policies.append(policy.numpy() - critic.numpy()[:, : k.NUM_POLICY_OBS])
+        policies.append(policy.numpy() - critic.numpy()[:, : observations_k.NUM_POLICY_OBS])
     np.testing.assert_array_equal(policies[0], 0.0, err_msg="noise disabled: policy = critic[:61]")
     d = np.abs(policies[1])
     assert (d <= scale * (1 + 1e-5) + 1e-6).all(), "noise within +- noise_scale"
@@ -373,8 +385,8 @@ def test_start_episodes():
     r = reset == 1
     params, p = loco_params(rng)
     view, task = structs(view_np, task_np)
-    launch(k.start_episodes, n, arr(reset, int), 3, params, view, task)
-    out = read(k.LocomotionTask, task)
+    launch(sampling_k.start_episodes, n, arr(reset, int), 3, params, view, task)
+    out = read(views_k.LocomotionTask, task)
     jq, jqd = view.joint_q.numpy().reshape(n, NQ), view.joint_qd.numpy().reshape(n, NQD)
     leg_q, arm_q = jq[np.arange(n)[:, None], view_np["leg_q"] % NQ], jq[np.arange(n)[:, None], view_np["arm_q"] % NQ]
 
@@ -445,8 +457,8 @@ def test_apply_events(scale):
     params, p = loco_params(rng, disturbance_scale=[scale])
     amplitude, push_velocity = p["arm_amplitude"] * scale, 0.5 * scale
     view, task = structs(view_np, task_np)
-    launch(k.apply_events, n, 5, params, view, task)
-    out = read(k.LocomotionTask, task)
+    launch(sampling_k.apply_events, n, 5, params, view, task)
+    out = read(views_k.LocomotionTask, task)
 
     changed = (("command", cmd), ("next_command_step", cmd), ("arm_target", arm), ("next_arm_step", arm),
                ("next_push_step", push), ("ee_force_h", force), ("next_ee_force_step", force))

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import warp as wp
 
-from dynpush.kernels.observations import POLICY_TERMS, PRIVILEGED_TERMS, compute_observations
-from dynpush.kernels.views import CONTACT_COLUMNS, EE_CONTACT, NUM_CRITIC_OBS, NUM_POLICY_OBS, PushTask, RobotView
+from dynpush.kernels.push.observations import POLICY_TERMS, PRIVILEGED_TERMS, compute_observations
+from dynpush.kernels.push.views import CONTACT_COLUMNS, EE_CONTACT, NUM_CRITIC_OBS, NUM_POLICY_OBS, PushTask, RobotView
 from dynpush.runtime.observation import POLICY_OBSERVATION_LAYOUT, POLICY_OBSERVATION_SIZE, policy_observation
 from warp_numpy_helpers import DEVICE, make_struct, quat_rotate, quat_rotate_inv, random_quat
 

@@ -34,7 +34,7 @@ def test_vecenv_interface_and_zero_copy(small_env):
 
 def test_the_critic_reads_no_sampled_action(small_env):
     """Regression: the critic's input holds every critic term but the previous (sampled) action, whose noise a
-    critic otherwise credits with the value of a state (kernels/observations.py); the actor still reads it."""
+    critic otherwise credits with the value of a state (kernels/push/observations.py); the actor still reads it."""
     env = small_env
     env.reset()
     actions = torch.linspace(-0.9, 0.9, 44).reshape(4, 11)  # distinct, within every clip

@@ -234,7 +234,7 @@ def test_learning_curve_counts_pauses_between_sittings_as_the_iteration_only(tmp
 
 
 def test_p_max_overrides_replace_the_papers_curriculum_of_a_group():
-    from dynpush.kernels.constraints import CONSTRAINT_GROUPS
+    from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
     from dynpush.policies.schedules import ScheduleConfig, p_max_at
 
     cfg = apply_overrides(TrainConfig.preset_config("cpu"), ["p_max_overrides={'collision': (0.1, 1.0)}"]).validate()

@@ -13,7 +13,7 @@ import warp as wp
 
 from dynpush.runtime.locomotion_layout import NUM_LEG_JOINTS
 
-from .frames import tilt_angle
+from ..frames import tilt_angle
 from .views import NUM_ARM_JOINTS, NUM_BASE_COMMANDS, NUM_COLLISIONS, PushTask, RobotView
 
 wp.set_module_options({"enable_backward": False})

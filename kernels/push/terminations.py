@@ -7,7 +7,7 @@ its base tilts beyond ``base_tilt`` or drops below ``base_min_height`` (threshol
 
 import warp as wp
 
-from .frames import tilt_angle
+from ..frames import tilt_angle
 from .views import PushTask, RobotView
 
 wp.set_module_options({"enable_backward": False})

@@ -9,7 +9,7 @@ torque limits, so an object that is too heavy slows the robot down as it would o
 
 import warp as wp
 
-from .frames import heading_roll_pitch, heading_yaw
+from ..frames import heading_roll_pitch, heading_yaw
 from .views import PushTask, RobotView
 
 wp.set_module_options({"enable_backward": False})

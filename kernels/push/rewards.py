@@ -9,7 +9,7 @@ goal ``<= theta_success``.
 
 import warp as wp
 
-from .frames import rotation_angle
+from ..frames import rotation_angle
 from .keypoints import keypoint_distance
 from .observations import object_origin_velocity
 from .views import NUM_ARM_JOINTS, NUM_BASE_COMMANDS, PushTask, RobotView

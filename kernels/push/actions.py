@@ -7,17 +7,10 @@ output); this kernel is the same formula for all worlds on the simulator's devic
 
 import warp as wp
 
+from ..common import clipped_action
 from .views import NUM_ACTIONS, NUM_ARM_JOINTS, NUM_BASE_COMMANDS, PushTask, RobotView
 
 wp.set_module_options({"enable_backward": False})
-
-
-@wp.func
-def clipped_action(a: float, clip: float):
-    """A raw policy output clipped to ``+-clip``; a non-finite one counts as zero."""
-    if not wp.isfinite(a):
-        return 0.0
-    return wp.clamp(a, -clip, clip)
 
 
 @wp.kernel

@@ -24,7 +24,8 @@ import warp as wp
 
 from dynpush.runtime.observation import POLICY_OBSERVATION_LAYOUT
 
-from .frames import next_rng
+from ..common import add_noise, write_vec
+from ..frames import next_rng
 from .views import EE_CONTACT, NUM_ACTIONS, NUM_ARM_JOINTS, PushTask, RobotView
 
 wp.set_module_options({"enable_backward": False})
@@ -63,30 +64,11 @@ def object_origin_velocity(x_o: wp.transform, qd_o: wp.spatial_vector, com_o: wp
 
 
 @wp.func
-def write_vec(out: wp.array2d(dtype=float), w: int, k: int, v: wp.vec3):
-    out[w, k + 0] = v[0]
-    out[w, k + 1] = v[1]
-    out[w, k + 2] = v[2]
-    return k + 3
-
-
-@wp.func
 def write_mat(out: wp.array2d(dtype=float), w: int, k: int, m: wp.mat33):
     for r in range(3):
         for c in range(3):
             out[w, k + 3 * r + c] = m[r, c]
     return k + 9
-
-
-@wp.func
-def add_noise(critic_obs: wp.array2d(dtype=float), policy_obs: wp.array2d(dtype=float), w: int,
-              noise_scale: wp.array(dtype=float), noise_enabled: int, rng: wp.uint32):
-    """The actor's observation: the first ``len(noise_scale)`` critic entries plus U(-s, s) noise where enabled."""
-    for i in range(noise_scale.shape[0]):
-        noise = float(0.0)
-        if noise_enabled != 0:
-            noise = wp.randf(rng, -1.0, 1.0) * noise_scale[i]
-        policy_obs[w, i] = critic_obs[w, i] + noise
 
 
 @wp.kernel

@@ -10,7 +10,7 @@ curricula may ask for less of the goal's yaw change or draw a share of the goals
 
 import warp as wp
 
-from .frames import fork_rng, next_rng, yaw_quat
+from ..frames import fork_rng, next_rng, yaw_quat
 from .views import NUM_ACTIONS, NUM_ARM_JOINTS, NUM_BASE_COMMANDS, CONTACT_COLUMNS, PushTask, RobotView
 
 wp.set_module_options({"enable_backward": False})

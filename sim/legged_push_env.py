@@ -67,7 +67,9 @@ class LocomotionNetwork:
 
 
 class LeggedPushEnv(PushEnv):
-    """See the module docstring."""
+    """See the module docstring. Beyond :class:`~dynpush.sim.push_env.PushEnv` it supplies the legged scene and
+    solver, the two step graphs (``_capture``) and their launch around the locomotion network (``_launch_step``), the
+    leg hooks and the locomotion task's state arrays."""
 
     def __init__(self, cfg):
         path = cfg.legged.locomotion_policy
@@ -173,11 +175,9 @@ class LeggedPushEnv(PushEnv):
             raise ValueError(f"leg targets must be finite with shape ({self.num_envs}, 12), got {targets.shape}")
         self.leg_actions.assign(self.leg_scaling.actions(targets))
 
-    def step(self, actions: torch.Tensor):
-        self.actions_t.copy_(actions)
-        with wp.ScopedDevice(self.wp_device):
-            wp.capture_launch(self._graph_actions)
-            if self.locomotion is not None:
-                self.leg_actions_t.copy_(torch.from_numpy(self.locomotion(self.leg_obs.numpy())))
-            wp.capture_launch(self._graph)
-        return self._step_result()
+    def _launch_step(self) -> None:
+        """The actions graph, the locomotion network on the leg observations (if it runs here), the physics graph."""
+        wp.capture_launch(self._graph_actions)
+        if self.locomotion is not None:
+            self.leg_actions_t.copy_(torch.from_numpy(self.locomotion(self.leg_obs.numpy())))
+        wp.capture_launch(self._graph)

@@ -31,7 +31,7 @@ from dynpush.kernels.locomotion import (
 from dynpush.runtime.actions import BASE_COMMAND_NAMES
 
 from .config import ConfigError
-from .env_state import ConstraintEpisodeStats, EnvBase, articulation_reset_mask
+from .env_state import EnvBase, articulation_reset_mask
 from .legged_scene import build_legged_scene, legged_view, locomotion_task
 from .locomotion_config import LocomotionEnvConfig
 
@@ -43,48 +43,45 @@ COMMAND_NAMES = BASE_COMMAND_NAMES  # the locomotion command is the push policy'
 
 
 class LocomotionEnv(EnvBase, VecEnv):
-    """Command tracking with the legged robot; see the module docstring."""
+    """Command tracking with the legged robot; see the module docstring.
+
+    Fills in :class:`~dynpush.sim.env_state.EnvBase`: the scene, MuJoCo solver, foot contact sensor, buffers,
+    parameters and base masses (``_build``), the step kernels, episode starts (``_reset_flagged``), observations,
+    episodes ended by any reset with ``/episode/fell``, and the state arrays, after whose loading MuJoCo takes the
+    restored base masses."""
 
     reward_names = REWARD_TERMS
-
-    def __init__(self, cfg: LocomotionEnvConfig):
-        self.cfg = cfg.validate()
-        self.num_envs = cfg.num_envs
-        self.num_actions = views_k.NUM_LEG_JOINTS
-        self.max_episode_length = cfg.max_episode_steps
-        self.device = cfg.device
-        self.wp_device = wp.get_device(cfg.device)
-        self.constraint_groups = list(CONSTRAINT_GROUPS)
-        with wp.ScopedDevice(self.wp_device):
-            self.scene = build_legged_scene(cfg.num_envs, cfg.device)
-            model = self.scene.model
-            # MuJoCo's contacts: feet, knees and base against the ground plane only (no self-collisions).
-            m = cfg.mujoco
-            self.solver = newton.solvers.SolverMuJoCo(model, use_mujoco_contacts=True, solver=m.solver, iterations=m.iterations,
-                                                      ls_iterations=m.ls_iterations, nconmax=m.nconmax, njmax=m.njmax)
-            # The iteration cap is deliberate (MuJoCoConfig); buffer overflows still warn.
-            import mujoco_warp
-
-            self.solver.mjw_model.opt.warn_overflow &= ~(mujoco_warp.OverflowType.ITERATIONS | mujoco_warp.OverflowType.LS_ITERATIONS)
-            self.state_0, self.state_1 = model.state(), model.state()
-            # Ground contact force on each lower leg (foot sphere and shank), from MuJoCo's constraint forces
-            # of the control step's last substep, for the foot contact force constraint.
-            self.contacts = newton.CollisionPipeline(model, rigid_contact_max=self.solver.get_max_contact_count(),
-                                                     soft_contact_max=0).contacts()
-            self.foot_sensor = SensorContact(model, sensing_bodies=[int(b) for b in self.scene.shank_body.reshape(-1)],
-                                             request_contact_attributes=False)
-            self.solver_observables = self.solver.observables(contacts=self.contacts,
-                                                              kinds=self.foot_sensor.solver_observable_kinds)
-            self.control = model.control()
-            self._make_buffers()
-            self._make_params()
-            self._randomize_base_masses()
-            self.reset(randomize_episode_step=cfg.randomize_first_episode_length)
-            with wp.ScopedCapture() as capture:
-                self._step_kernels()
-            self._graph = capture.graph
+    num_actions = views_k.NUM_LEG_JOINTS
+    _constraint_groups = CONSTRAINT_GROUPS
+    cfg: LocomotionEnvConfig
 
     # ------------------------------------------------------------------ construction
+    def _build(self) -> None:
+        cfg = self.cfg
+        self.scene = build_legged_scene(cfg.num_envs, cfg.device)
+        model = self.scene.model
+        # MuJoCo's contacts: feet, knees and base against the ground plane only (no self-collisions).
+        m = cfg.mujoco
+        self.solver = newton.solvers.SolverMuJoCo(model, use_mujoco_contacts=True, solver=m.solver, iterations=m.iterations,
+                                                  ls_iterations=m.ls_iterations, nconmax=m.nconmax, njmax=m.njmax)
+        # The iteration cap is deliberate (MuJoCoConfig); buffer overflows still warn.
+        import mujoco_warp
+
+        self.solver.mjw_model.opt.warn_overflow &= ~(mujoco_warp.OverflowType.ITERATIONS | mujoco_warp.OverflowType.LS_ITERATIONS)
+        self.state_0, self.state_1 = model.state(), model.state()
+        # Ground contact force on each lower leg (foot sphere and shank), from MuJoCo's constraint forces
+        # of the control step's last substep, for the foot contact force constraint.
+        self.contacts = newton.CollisionPipeline(model, rigid_contact_max=self.solver.get_max_contact_count(),
+                                                 soft_contact_max=0).contacts()
+        self.foot_sensor = SensorContact(model, sensing_bodies=[int(b) for b in self.scene.shank_body.reshape(-1)],
+                                         request_contact_attributes=False)
+        self.solver_observables = self.solver.observables(contacts=self.contacts,
+                                                          kinds=self.foot_sensor.solver_observable_kinds)
+        self.control = model.control()
+        self._make_buffers()
+        self._make_params()
+        self._randomize_base_masses()
+
     def _make_buffers(self) -> None:
         n, scene = self.num_envs, self.scene
         self.task = locomotion_task(n)
@@ -112,7 +109,6 @@ class LocomotionEnv(EnvBase, VecEnv):
         self.constraints_t = t(self.constraints)
         self.reset_t, self.time_out_t = t(self.reset_flags), t(self.time_out)
         self.episode_length_buf = t(self.task.episode_step)
-        self._constraint_stats = ConstraintEpisodeStats(CONSTRAINT_GROUPS, n, self.constraints_t.device)
 
     def _make_params(self) -> None:
         cfg, robot = self.cfg, self.scene.robot
@@ -184,9 +180,6 @@ class LocomotionEnv(EnvBase, VecEnv):
         self.params.disturbance_scale.fill_(scale)
 
     # ------------------------------------------------------------------ the step
-    def _launch(self, kernel, inputs) -> None:
-        wp.launch(kernel, dim=self.num_envs, inputs=inputs, device=self.wp_device)
-
     def _step_kernels(self) -> None:
         cfg = self.cfg
         self._launch(actions_k.process_leg_actions, [self.raw_actions, self.params, self.view, self.task,
@@ -212,12 +205,11 @@ class LocomotionEnv(EnvBase, VecEnv):
                                                          self.constraints])
         self._launch(terminations_k.compute_terminations, [self.view, self.task, self.limits, self.reset_flags,
                                                            self.time_out])
-        self._start_flagged()
+        self._reset_flagged()
         self._launch(sampling_k.apply_events, [cfg.seed, self.params, self.view, self.task])
         self._observe()
 
-    def _start_flagged(self) -> None:
-        """New episodes in the worlds with ``reset_flags != 0`` (inside the captured step)."""
+    def _reset_flagged(self) -> None:
         model = self.scene.model
         self._launch(sampling_k.start_episodes, [self.reset_flags, self.cfg.seed, self.params, self.view, self.task])
         wp.launch(articulation_reset_mask, dim=model.articulation_count,
@@ -244,26 +236,6 @@ class LocomotionEnv(EnvBase, VecEnv):
                                                            self.critic_obs])
 
     # ------------------------------------------------------------------ VecEnv
-    def reset(self, randomize_episode_step: bool = False) -> TensorDict:
-        """Resets every world (outside the graph); ``randomize_episode_step`` spreads the first episodes' ends."""
-        with wp.ScopedDevice(self.wp_device):
-            self.reset_flags.fill_(1)
-            self._start_flagged()
-            if randomize_episode_step:
-                rng = np.random.default_rng(self.cfg.seed)
-                self.task.episode_step.assign(rng.integers(0, self.max_episode_length, self.num_envs, dtype=np.int32))
-            self.control.joint_target_q.assign(self.state_0.joint_q)
-            self._observe()
-        self._constraint_stats.clear()
-        return self.get_observations()
-
-    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
-        self.actions_t.copy_(actions)
-        with wp.ScopedDevice(self.wp_device):
-            wp.capture_launch(self._graph)
-        extras = {"time_outs": self.time_out_t.to(torch.bool), "constraints": self.constraints_t, "log": self._episode_log()}
-        return self.get_observations(), self.reward_t.clone(), self.reset_t.to(torch.long), extras
-
     def set_commands(self, commands: np.ndarray, hold: bool = True) -> TensorDict:
         """Gives every world the 6D command ``commands`` (num_envs, 6), now; with ``hold`` it is not resampled
         for the rest of the episode (evaluation). Returns the observations."""
@@ -277,18 +249,12 @@ class LocomotionEnv(EnvBase, VecEnv):
             self._observe()
         return self.get_observations()
 
-    def _episode_log(self) -> dict[str, float | torch.Tensor]:
-        """Per ended episode: fell (not timed out) and the share of steps with each constraint group violated;
-        per step: the mean of each reward term."""
-        log: dict[str, float | torch.Tensor] = {}
-        self._constraint_stats.record(self.constraints_t)
-        ended = self.reset_t != 0
-        if bool(ended.any()):
-            log.update(self._constraint_stats.take(ended))
-            log["/episode/fell"] = (self.time_out_t[ended] == 0).float()
-        for i, name in enumerate(REWARD_TERMS):
-            log[f"/reward/{name}"] = float(self.reward_terms_t[:, i].mean())
-        return log
+    def _ended_episodes(self) -> torch.Tensor:
+        return self.reset_t != 0
+
+    def _ended_episode_log(self, ended: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Fell: the episode ended before its time ran out."""
+        return {"/episode/fell": (self.time_out_t[ended] == 0).float()}
 
     # ------------------------------------------------------------------ checkpointing
     def _state_arrays(self) -> dict[str, wp.array]:
@@ -302,11 +268,6 @@ class LocomotionEnv(EnvBase, VecEnv):
         arrays["mujoco.qacc_warmstart"] = self.solver.mjw_data.qacc_warmstart  # the solver starts from it
         return arrays
 
-    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
-        mismatch = self.state_mismatch(state)
-        if mismatch is not None:
-            raise ValueError(mismatch)
-        with wp.ScopedDevice(self.wp_device):
-            for name, array in self._state_arrays().items():
-                array.assign(state[name])
-            self.solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
+    def _after_state_load(self) -> None:
+        """MuJoCo's model takes the restored base masses."""
+        self.solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)

@@ -33,7 +33,7 @@ from dynpush.kernels.push.views import CONTACT_COLUMNS, NUM_ACTIONS, NUM_ARM_JOI
 from dynpush.runtime.actions import ActionMapping, ActionScaling
 
 from .config import ConfigError, PushEnvConfig
-from .env_state import ConstraintEpisodeStats, EnvBase, articulation_reset_mask
+from .env_state import EnvBase, articulation_reset_mask
 from .episode import EpisodeSpec
 from .scene import build_scene
 
@@ -44,40 +44,36 @@ CONSTRAINT_GROUPS = constraints_k.CONSTRAINT_GROUPS
 
 
 class PushEnv(EnvBase, VecEnv):
-    """Goal pushing with a tracked-base mobile manipulator (paper III); see the module docstring."""
+    """Goal pushing with a tracked-base mobile manipulator (paper III); see the module docstring.
+
+    Fills in :class:`~dynpush.sim.env_state.EnvBase`: the scene, solver, buffers and parameters (``_build``), the step
+    kernels, episode sampling (``_reset_flagged``: draw, then ``_start_flagged``), observations, episodes ended by
+    success or failure (``episode_success >= 0``) with success, toppled and the near-goal split, and the state
+    arrays, whose loading first re-applies every world's saved episode. Robot-model hooks for
+    :class:`~dynpush.sim.legged_push_env.LeggedPushEnv`: ``_build_scene``, ``_make_solver``, ``_drive_base``,
+    ``_robot_constraints``, ``_start_robot_flagged``."""
 
     reward_names = REWARD_TERMS
-
-    def __init__(self, cfg: PushEnvConfig):
-        self.cfg = cfg.validate()
-        self.num_envs = cfg.num_envs
-        self.num_actions = NUM_ACTIONS
-        self.max_episode_length = cfg.max_episode_steps
-        self.device = cfg.device
-        self.wp_device = wp.get_device(cfg.device)
-        self.constraint_groups = list(CONSTRAINT_GROUPS)
-        with wp.ScopedDevice(self.wp_device):
-            self.scene = self._build_scene()
-            # How actions become commands (the runtime's numpy definition): the action kernel's parameters.
-            a, arm_default = cfg.actions, self.scene.robot.arm_default[:NUM_ARM_JOINTS]
-            self.action_mapping = ActionMapping(ActionScaling(a.base_default, a.base_scale),
-                                                ActionScaling(arm_default, a.arm_scale), a.clip)
-            # Newton averages the two coefficients of a contact: the object's own is 2 * combined - floor.
-            if 2.0 * cfg.randomization.friction[0] < self.scene.ground_friction:
-                raise ConfigError(f"randomization.friction[0] must be >= half the floor's coefficient"
-                                  f" ({self.scene.ground_friction} in ground.usda), got {cfg.randomization.friction[0]}")
-            self._make_solver()
-            self._make_buffers()
-            self._make_params()
-            self.reset(randomize_episode_step=cfg.randomize_first_episode_length)
-            self._capture()
-
-    def _capture(self) -> None:
-        with wp.ScopedCapture() as capture:  # works on the CPU device too: 6.4k -> ~8k world-steps/s at 256 worlds, same states
-            self._step_kernels()
-        self._graph = capture.graph
+    num_actions = NUM_ACTIONS
+    _constraint_groups = CONSTRAINT_GROUPS
+    cfg: PushEnvConfig
 
     # ------------------------------------------------------------------ construction
+    def _build(self) -> None:
+        cfg = self.cfg
+        self.scene = self._build_scene()
+        # How actions become commands (the runtime's numpy definition): the action kernel's parameters.
+        a, arm_default = cfg.actions, self.scene.robot.arm_default[:NUM_ARM_JOINTS]
+        self.action_mapping = ActionMapping(ActionScaling(a.base_default, a.base_scale),
+                                            ActionScaling(arm_default, a.arm_scale), a.clip)
+        # Newton averages the two coefficients of a contact: the object's own is 2 * combined - floor.
+        if 2.0 * cfg.randomization.friction[0] < self.scene.ground_friction:
+            raise ConfigError(f"randomization.friction[0] must be >= half the floor's coefficient"
+                              f" ({self.scene.ground_friction} in ground.usda), got {cfg.randomization.friction[0]}")
+        self._make_solver()
+        self._make_buffers()
+        self._make_params()
+
     def _build_scene(self):
         return build_scene(self.cfg.num_envs, self.cfg.device)
 
@@ -193,8 +189,6 @@ class PushEnv(EnvBase, VecEnv):
         self.success_t = t(self.success)
         self.near_goal_ended_t = t(self.near_goal_ended)
         self.episode_length_buf = t(task.episode_step)
-        # Per-episode constraint statistics (torch glue): steps with any column of a group violated.
-        self._constraint_stats = ConstraintEpisodeStats(CONSTRAINT_GROUPS, n, self.constraints_t.device)
 
     def _robot_view(self, state: newton.State) -> RobotView:
         scene, model = self.scene, self.scene.model
@@ -317,9 +311,6 @@ class PushEnv(EnvBase, VecEnv):
         with wp.ScopedDevice(self.wp_device):
             self._step_kernels()
 
-    def _launch(self, kernel, inputs):
-        wp.launch(kernel, dim=self.num_envs, inputs=inputs, device=self.wp_device)
-
     def _physics_substeps(self) -> None:
         model, cfg = self.scene.model, self.cfg
         dt = cfg.control_dt / cfg.sim.substeps
@@ -350,7 +341,6 @@ class PushEnv(EnvBase, VecEnv):
         self._launch(base_tracking.apply_base_wrench, [view, self.task, self.tracking_params, state.body_f])
 
     def _step_kernels(self) -> None:
-        """Everything of one control step; captured once into a graph."""
         self._process_actions()
         self._physics_and_task()
 
@@ -463,47 +453,10 @@ class PushEnv(EnvBase, VecEnv):
             self._observe()
         return self.get_observations()
 
-    def _sync_targets_and_observe(self) -> None:
-        self.control.joint_target_q.assign(self.state_0.joint_q)
-        self._observe()
-
     def _observe(self) -> None:
         self._launch(observations_k.compute_observations, [self.views[0], self.task, self.noise_scale,
                                                            int(self.cfg.noise.enabled), self.cfg.seed,
                                                            self.policy_obs, self.critic_obs])
-
-    # ------------------------------------------------------------------ VecEnv
-    def reset(self, randomize_episode_step: bool = False) -> TensorDict:
-        """Resets every world (outside the graph) and returns the first observations.
-
-        With ``randomize_episode_step`` the episode counters start uniformly in [0, episode length).
-        """
-        with wp.ScopedDevice(self.wp_device):
-            self.reset_flags.fill_(1)
-            self._reset_flagged()
-            if randomize_episode_step:
-                # Spread the first episodes' ends over one episode length so that resets (and episode
-                # statistics) do not come in synchronized waves.
-                rng = np.random.default_rng(self.cfg.seed)
-                self.task.episode_step.assign(rng.integers(0, self.max_episode_length, self.num_envs, dtype=np.int32))
-            self._sync_targets_and_observe()
-        self._constraint_stats.clear()
-        return self.get_observations()
-
-    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
-        self.actions_t.copy_(actions)
-        with wp.ScopedDevice(self.wp_device):
-            wp.capture_launch(self._graph)
-        return self._step_result()
-
-    def _step_result(self) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
-        dones = self.reset_t.to(torch.long)
-        extras = {
-            "time_outs": self.time_out_t.to(torch.bool),
-            "constraints": self.constraints_t,
-            "log": self._episode_log(),
-        }
-        return self.get_observations(), self.reward_t, dones, extras
 
     # ------------------------------------------------------------------ checkpointing
     def _state_arrays(self) -> dict[str, wp.array]:
@@ -517,21 +470,16 @@ class PushEnv(EnvBase, VecEnv):
         arrays["critic_obs"] = self.critic_obs
         return arrays
 
-    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
-        """Restores :meth:`state_dict`: re-applies every world's episode, then the saved state."""
-        mismatch = self.state_mismatch(state)
-        if mismatch is not None:
-            raise ValueError(mismatch)
-        arrays = self._state_arrays()
-        with wp.ScopedDevice(self.wp_device):
-            for name, array in arrays.items():
-                if name.startswith("spec."):
-                    array.assign(state[name])
-            self.reset_flags.fill_(1)
-            self._start_flagged()  # object variants, geometry and mass properties of every world
-            for name, array in arrays.items():
+    def _before_state_load(self, arrays: dict[str, wp.array], state: dict[str, np.ndarray]) -> None:
+        """Re-applies every world's saved episode (object variants, geometry and mass properties) before the saved state."""
+        for name, array in arrays.items():
+            if name.startswith("spec."):
                 array.assign(state[name])
-            self.reset_flags.zero_()
+        self.reset_flags.fill_(1)
+        self._start_flagged()
+
+    def _after_state_load(self) -> None:
+        self.reset_flags.zero_()
 
     def set_goal_difficulty(self, difficulty: float) -> None:
         """Scales the yaw change the goal of episodes drawn from now on asks for (a training
@@ -560,26 +508,16 @@ class PushEnv(EnvBase, VecEnv):
         self._episodes_ended = self._episodes_succeeded = 0
         return succeeded / ended if ended else None
 
-    def _episode_log(self) -> dict[str, float | torch.Tensor]:
-        """Metrics of the episodes that ended this step and the mean of each reward term.
+    def _ended_episodes(self) -> torch.Tensor:
+        return self.episode_success_t >= 0
 
-        Episode metrics are per ended episode (tensors), so rsl_rl's logger, which concatenates
-        them over an iteration, weighs every episode equally: success and toppled at the end, and
-        per constraint group the fraction of the episode's steps with a violated column (Table II).
-        """
-        log: dict[str, float | torch.Tensor] = {}
-        self._constraint_stats.record(self.constraints_t)
-        ended = self.episode_success_t >= 0
-        if bool(ended.any()):
-            log.update(self._constraint_stats.take(ended))
-            succeeded = (self.episode_success_t[ended] == 1).float()
-            self._episodes_ended += int(succeeded.numel())
-            self._episodes_succeeded += int(succeeded.sum())
-            log["/episode/success"] = succeeded
-            log["/episode/toppled"] = self.episode_toppled_t[ended].float()
-            log.update(self._near_goal_log(ended, succeeded))
-        for i, name in enumerate(REWARD_TERMS):
-            log[f"/reward/{name}"] = float(self.reward_terms_t[:, i].mean())
+    def _ended_episode_log(self, ended: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Success and toppled at the end (counted for :meth:`take_success_rate`), and the near-goal split."""
+        succeeded = (self.episode_success_t[ended] == 1).float()
+        self._episodes_ended += int(succeeded.numel())
+        self._episodes_succeeded += int(succeeded.sum())
+        log = {"/episode/success": succeeded, "/episode/toppled": self.episode_toppled_t[ended].float()}
+        log.update(self._near_goal_log(ended, succeeded))
         return log
 
     def _near_goal_log(self, ended: torch.Tensor, succeeded: torch.Tensor) -> dict[str, torch.Tensor]:

@@ -1,6 +1,7 @@
 """dynpush export: ONNX parity with the torch actor, graph checks, metadata contract, loader errors, warp-nn."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import onnx
@@ -116,6 +117,18 @@ def test_cli_export_of_a_chosen_checkpoint(exported, tmp_path):
     assert read_metadata(onnx.load(str(out)))["checkpoint"] == "model_0.pt"
     with pytest.raises(FileNotFoundError, match="model_7.pt"):
         export_policy(run, "model_7.pt", tmp_path / "missing.onnx")
+
+
+def test_the_committed_long_run_loads_and_exports_from_its_checkpoint(tmp_path):
+    """The long run in campaigns/ resumes from its latest checkpoint in later sittings: that file keeps loading into
+    today's actor and exporting, whatever the code around it becomes."""
+    run = Path(__file__).resolve().parent.parent / "campaigns" / "long1"
+    checkpoint = max(run.glob("model_*.pt"), key=lambda path: int(path.stem.split("_")[1]))
+    out = tmp_path / "long1.onnx"
+    assert main(["export", str(run), "--checkpoint", checkpoint.name, "--out", str(out)]) == 0
+    actor = load_actor(checkpoint, load_run_config(run))
+    obs = observations(actor, 8, seed=3)
+    np.testing.assert_allclose(OnnxPolicy(out, batched=True)(obs), torch_actions(actor, obs), atol=1e-5)
 
 
 def test_the_same_file_runs_in_warp_nn(exported):

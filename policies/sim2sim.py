@@ -5,10 +5,12 @@
 with the runtime's own datagrams (``dynpush.runtime.packets``):
 
 - **commands in** (``DPC1``): the onboard locomotion is the tracked base, so the 6D base command and
-  the 5 arm targets become the PushEnv's actions through the inverse of its action mapping
-  (``dynpush.runtime.actions``; the policy's contract must hold the same parameters), which the environment's
-  step maps back. Mode stop (or no command yet): the default base command (zero velocities), arm targets at
-  the measured joint positions.
+  the 5 arm targets go to the PushEnv as they are (``PushEnv.step_commands``: the runtime applied the action
+  mapping, the environment does not apply it again; the policy's contract must still hold the environment's
+  parameters). The packets carry no policy actions, so the environment's action terms (its ``last_actions``
+  observation, action-rate reward and arm-rate constraint) see a policy at rest; nothing here reads them. Mode
+  stop (or no command yet): the default base command (zero velocities), arm targets at the measured joint
+  positions.
 - **mocap out** (``DPM1``), once per control step: base and object poses (world Z-up, m, (x, y, z, w))
   plus Gaussian position noise (``mocap_noise_m`` std per axis) and a random rotation (rotation vector
   with ``mocap_noise_rad`` std per axis); each frame dropped with probability ``drop`` and delivered
@@ -98,7 +100,8 @@ class SimToSimConfig:
 
 
 def check_contract_matches_env(contract: PolicyContract, env) -> None:
-    """The contract's action mapping must be the environment's (a mismatch would mistranslate commands)."""
+    """The contract's action mapping must be the environment's (the runtime maps the policy's actions with the
+    contract's; the environment's training used its own, so a mismatch would run the policy on other commands)."""
     mapping = env.action_mapping
     pairs = {
         "base_command_default": (contract.base_command_default, mapping.base.default),
@@ -150,25 +153,30 @@ class SimRobot:
         self.clock: tuple[int, int] | None = None  # real time: (deadline index, steps before it) of the last wait
         self._clock_reported = -CLOCK_REPORT_PERIODS
 
-    # ------------------------------------------------------------------ commands -> actions
+    # ------------------------------------------------------------------ commands in
     def receive_commands(self) -> None:
         for datagram in self.endpoint.drain():
             try:
-                self.command = decode_command(datagram.data)
+                command = decode_command(datagram.data)
             except PacketError:
                 self.malformed_commands += 1
+                continue
+            if not (np.all(np.isfinite(command.base_command)) and np.all(np.isfinite(command.arm_targets))):
+                self.malformed_commands += 1  # the environment takes finite commands only; the last good one stays
+                continue
+            self.command = command
 
-    def actions(self) -> torch.Tensor:
-        """The environment's actions (1, 11) whose commands, as its step maps them, are the latest command's."""
-        mapping, command = self.env.action_mapping, self.command
+    def commands(self) -> tuple[np.ndarray, np.ndarray]:
+        """The base command (1, 6) and arm targets (1, 5) [rad] of the latest command, for ``env.step_commands``."""
+        command = self.command
         if command is None or command.mode == MODE_STOP:
-            a = mapping.actions(mapping.base.default, self.probe.arm_q()[0])
+            base_command, arm_targets = self.env.action_mapping.base.default, self.probe.arm_q()[0]
         else:
-            a = mapping.actions(command.base_command, command.arm_targets)
+            base_command, arm_targets = command.base_command, command.arm_targets
         if self.legged:
             given = command is not None and len(command.leg_targets) == len(self._leg_default)
             self.env.set_leg_targets((command.leg_targets if given else self._leg_default)[None])
-        return torch.as_tensor(a, dtype=torch.float32)[None]
+        return np.asarray(base_command, dtype=np.float32)[None], np.asarray(arm_targets, dtype=np.float32)[None]
 
     # ------------------------------------------------------------------ measurements -> datagrams
     def _runtime(self, port: int) -> tuple[str, int]:
@@ -246,7 +254,7 @@ class SimRobot:
             self.receive_commands()
             if self.command is not None and self.command.state == State.STOPPED:
                 break  # latched until the runtime restarts: the remaining episodes cannot run
-            env.step(self.actions())
+            env.step_commands(*self.commands())
             self.step += 1
             if started:
                 episode_steps += 1

@@ -11,8 +11,10 @@ Who uses it: the runtime's controller turns the ONNX output into commands with t
 contract (``PolicyContract.action_mapping``); the simulator builds its own from its config and robot
 (``PushEnv.action_mapping``) and launches the same formula on the GPU as the Warp kernel ``kernels/push/actions.py``
 (``tests/test_action_mapping.py`` checks that both agree on random actions); sim-to-sim hands the runtime's commands
-to the simulator as actions through the inverse, :meth:`ActionMapping.actions`, and so does the runtime for the
-previous action it records outside PUSH. The locomotion policy's leg targets use :class:`ActionScaling` too.
+to the simulator as they are (``PushEnv.step_commands``), so the mapping is applied once. :meth:`ActionMapping.actions`
+(targets back to actions) serves where a policy-side quantity is wanted of commands: the runtime's previous action
+outside PUSH (the observation's ``last_actions``) and the scripted policies. The locomotion policy's leg targets use
+:class:`ActionScaling` too.
 
 A non-finite action stays non-finite here, because the runtime must notice it and stop the robot; the kernel counts
 it as zero instead, so that one diverged world cannot poison a training batch.

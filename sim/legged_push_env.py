@@ -8,10 +8,11 @@ become the leg joint targets of the PD drives. The leg-torque constraint columns
 torques ``|tau| - tau_nominal`` instead of the tracked base's quasi-static estimate.
 
 One control step is two captured graphs around the locomotion network (onnxruntime, all worlds in one
-call): (1) push actions -> base command and arm targets, and the locomotion observation of every world;
-(2) leg actions -> leg targets, physics, then the push task's rewards, constraints, terminations, resets
-and observations. Without a locomotion policy (``legged.locomotion_policy = ""``) the leg targets come from
-:meth:`LeggedPushEnv.set_leg_targets` (sim-to-sim: the runtime runs the locomotion ONNX).
+call): (1) push actions -> base command and arm targets (or those commands given: ``step_commands``), and
+the locomotion observation of every world; (2) leg actions -> leg targets, physics, then the push task's
+rewards, constraints, terminations, resets and observations. Without a locomotion policy
+(``legged.locomotion_policy = ""``) the leg targets come from :meth:`LeggedPushEnv.set_leg_targets`
+(sim-to-sim: the runtime runs the locomotion ONNX).
 """
 
 from __future__ import annotations
@@ -130,13 +131,21 @@ class LeggedPushEnv(PushEnv):
         self.leg_limits = lim
         self.noise_free = f32(np.zeros(loco_observations.NUM_POLICY_OBS))
 
-    def _capture(self) -> None:
+    def _capture_front(self, take_commands) -> wp.Graph:
+        """The first graph of a step: ``take_commands`` (push actions or given commands), the locomotion observation."""
         with wp.ScopedCapture() as capture:
-            self._process_actions()
+            take_commands()
             self._launch(loco_observations.compute_observations, [self.leg_view, self.leg_task, self.leg_params,
                                                                   self.noise_free, 0, self.cfg.seed, self.leg_obs,
                                                                   self.leg_critic_obs])
-        self._graph_actions = capture.graph
+        return capture.graph
+
+    def _capture_commands(self) -> None:
+        """step_commands shares the second graph; only its first is its own."""
+        self._graph_commands = self._capture_front(self._apply_commands)
+
+    def _capture(self) -> None:
+        self._graph_actions = self._capture_front(self._process_actions)
         with wp.ScopedCapture() as capture:
             self._launch(loco_actions.process_leg_actions, [self.leg_actions, self.leg_params, self.leg_view,
                                                             self.leg_task, self.control.joint_target_q])
@@ -175,9 +184,13 @@ class LeggedPushEnv(PushEnv):
             raise ValueError(f"leg targets must be finite with shape ({self.num_envs}, 12), got {targets.shape}")
         self.leg_actions.assign(self.leg_scaling.actions(targets))
 
-    def _launch_step(self) -> None:
-        """The actions graph, the locomotion network on the leg observations (if it runs here), the physics graph."""
-        wp.capture_launch(self._graph_actions)
+    def _launch_step(self, front: wp.Graph | None = None) -> None:
+        """The actions graph (or ``front``), the locomotion network on the leg observations (if it runs here), the
+        physics graph."""
+        wp.capture_launch(self._graph_actions if front is None else front)
         if self.locomotion is not None:
             self.leg_actions_t.copy_(torch.from_numpy(self.locomotion(self.leg_obs.numpy())))
         wp.capture_launch(self._graph)
+
+    def _launch_command_step(self) -> None:
+        self._launch_step(self._graph_commands)

@@ -1,6 +1,7 @@
 """PushEnv: N push worlds in one Newton model, as an rsl_rl ``VecEnv``.
 
-One control step (50 Hz) is one captured Warp graph: action processing, ``substeps`` physics
+One control step (50 Hz) is one captured Warp graph: action processing (or, for :meth:`PushEnv.step_commands`,
+commands given as they are, in a graph of their own), ``substeps`` physics
 substeps (tracking wrench, collision, contact classification, solver), random pushes, joint
 readings, rewards, constraints, terminations, auto-reset of finished worlds and observations. The
 torch tensors handed to the trainer are zero-copy views of the Warp buffers.
@@ -134,6 +135,8 @@ class PushEnv(EnvBase, VecEnv):
         model = scene.model
         self.views = [self._robot_view(s) for s in (self.state_0, self.state_1)]
         self.raw_actions = zeros((n, NUM_ACTIONS))
+        self.command_base = zeros((n, 6))  # step_commands: the base command and arm targets given as they are
+        self.command_arm = zeros((n, NUM_ARM_JOINTS))
         self.policy_obs = zeros((n, NUM_POLICY_OBS))
         self.critic_obs = zeros((n, NUM_CRITIC_OBS))
         self.reward = zeros(n)
@@ -176,6 +179,7 @@ class PushEnv(EnvBase, VecEnv):
         # Zero-copy torch views.
         t = wp.to_torch
         self.actions_t = t(self.raw_actions)
+        self.command_base_t, self.command_arm_t = t(self.command_base), t(self.command_arm)
         self.policy_obs_t = t(self.policy_obs)
         self.critic_obs_t = t(self.critic_obs)
         self.critic_input_columns = torch.tensor(observations_k.critic_input_columns(), device=self.critic_obs_t.device)
@@ -311,6 +315,55 @@ class PushEnv(EnvBase, VecEnv):
         with wp.ScopedDevice(self.wp_device):
             self._step_kernels()
 
+    _graph_commands: wp.Graph | None = None
+    """The step graph of :meth:`step_commands`, captured at its first call (training never pays for it)."""
+
+    def step_commands(
+        self, base_command: torch.Tensor | np.ndarray, arm_targets: torch.Tensor | np.ndarray,
+        actions: torch.Tensor | np.ndarray | None = None,
+    ) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
+        """One control step on commands given as they are, mapped outside (sim-to-sim: the runtime's); same result as
+        :meth:`step`.
+
+        ``base_command`` (num_envs, 6) in ``BASE_COMMAND_NAMES`` order and units and ``arm_targets`` (num_envs, 5)
+        [rad] go where the action mapping writes its own (``task.base_command``, ``task.arm_command``, the arm's joint
+        position drives), unclipped and unscaled (kernel ``apply_commands``). The action terms (the policy observation's
+        ``last_actions``, the action-rate reward and the arm-rate constraint) are about the policy's output, which
+        commands do not carry: ``actions`` (num_envs, 11), the raw policy output behind the commands if the caller has
+        it, are recorded as :meth:`step` records its own (so that ``step_commands(*action_mapping.commands(a), a)`` is
+        ``step(a)``); without them the history records zeros, a policy at rest, and those terms do not describe the
+        commands. Commands must be finite.
+        """
+        base_command, arm_targets = (torch.as_tensor(c, dtype=torch.float32) for c in (base_command, arm_targets))
+        if base_command.shape != self.command_base_t.shape or arm_targets.shape != self.command_arm_t.shape:
+            raise ValueError(f"commands must have shapes {tuple(self.command_base_t.shape)} and"
+                             f" {tuple(self.command_arm_t.shape)}, got {tuple(base_command.shape)} and"
+                             f" {tuple(arm_targets.shape)}")
+        if not (bool(torch.isfinite(base_command).all()) and bool(torch.isfinite(arm_targets).all())):
+            raise ValueError("commands must be finite")
+        self.command_base_t.copy_(base_command)
+        self.command_arm_t.copy_(arm_targets)
+        if actions is None:
+            self.actions_t.zero_()
+        else:
+            self.actions_t.copy_(torch.as_tensor(actions, dtype=torch.float32))
+        with wp.ScopedDevice(self.wp_device):
+            if self._graph_commands is None:
+                self._capture_commands()
+            self._launch_command_step()
+        return self._step_result()
+
+    def _capture_commands(self) -> None:
+        """Captures the step of :meth:`step_commands` into ``_graph_commands``."""
+        with wp.ScopedCapture() as capture:
+            self._apply_commands()
+            self._physics_and_task()
+        self._graph_commands = capture.graph
+
+    def _launch_command_step(self) -> None:
+        """Runs one control step of :meth:`step_commands` on the commands in ``command_base`` and ``command_arm``."""
+        wp.capture_launch(self._graph_commands)
+
     def _physics_substeps(self) -> None:
         model, cfg = self.scene.model, self.cfg
         dt = cfg.control_dt / cfg.sim.substeps
@@ -350,6 +403,10 @@ class PushEnv(EnvBase, VecEnv):
             self._launch(actions_k.process_actions, [self.raw_actions, self.views[0], self.task, self.base_default,
                                                      self.base_scale, float(mapping.arm.scale), mapping.clip,
                                                      self.control.joint_target_q])
+
+    def _apply_commands(self) -> None:
+        self._launch(actions_k.apply_commands, [self.raw_actions, self.command_base, self.command_arm, self.views[0],
+                                                self.task, self.action_mapping.clip, self.control.joint_target_q])
 
     def _physics_and_task(self) -> None:
         """Physics substeps, then rewards, constraints, terminations, resets and observations."""

@@ -142,6 +142,28 @@ def test_process_actions():
     close(joint_target_q.numpy(), target, err_msg="arm targets at the arm's joint_q entries, the rest untouched")
 
 
+def test_apply_commands():
+    """Commands mapped outside (sim-to-sim) land where process_actions writes its own; the action history shifts."""
+    rng = np.random.default_rng(12)
+    n, clip = 64, 2.5
+    robot_np, task_np = random_state(rng, n)
+    raw = (3.0 * rng.normal(size=(n, 11))).astype(np.float32)
+    raw[0, 0], raw[1, 5] = np.nan, np.inf
+    base_command = rng.normal(size=(n, 6)).astype(np.float32)
+    arm_targets = rng.uniform(-2.0, 2.0, (n, 5)).astype(np.float32)
+    target = rng.normal(size=n * Q).astype(np.float32)
+    robot, task = structs(robot_np, task_np)
+    joint_target_q = arr(target)
+    launch(actions.apply_commands, n, arr(raw), arr(base_command), arr(arm_targets), robot, task, clip, joint_target_q)
+
+    close(task.last_actions.numpy(), task_np["actions"], atol=0)
+    close(task.actions.numpy(), np.clip(np.where(np.isfinite(raw), raw, 0.0), -clip, clip), atol=0)
+    close(task.base_command.numpy(), base_command, atol=0)
+    close(task.arm_command.numpy(), arm_targets, atol=0)
+    target[robot_np["arm_q_start"][:, None] + np.arange(5)] = arm_targets
+    close(joint_target_q.numpy(), target, atol=0, err_msg="arm targets at the arm's joint_q entries, the rest untouched")
+
+
 # --------------------------------------------------------------------------- tracked base (DESIGN decision 2)
 def test_apply_base_wrench():
     rng = np.random.default_rng(2)

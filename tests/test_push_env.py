@@ -164,3 +164,33 @@ def test_episode_metrics_report_the_fraction_of_violated_steps():
     log = extras["log"]
     assert log["/episode/violated/base_command"].tolist() == [1.0, 0.0]
     assert log["/episode/violated/collision"].tolist() == [0.0, 0.0]
+
+
+def test_step_commands_is_step_on_the_mapped_actions(small_env):
+    """``step_commands`` with the commands that the action mapping (``dynpush.runtime.actions``) makes of some actions
+    is ``step`` on those actions, from the same state: observations, rewards and constraints (sim-to-sim hands the
+    runtime's commands to the environment this way, without inverting the mapping)."""
+    env = small_env
+    env.reset()
+    start = env.state_dict()
+    generator = torch.Generator().manual_seed(7)
+    actions = [1.5 * torch.randn(4, 11, generator=generator) for _ in range(4)]  # some beyond the clip
+    stepped = []
+    for a in actions:
+        obs, reward, dones, extras = env.step(a)
+        stepped.append((obs["policy"], obs["critic"], reward, dones, extras["constraints"].clone()))
+    env.load_state_dict(start)
+    for a, expected in zip(actions, stepped):
+        base_command, arm_targets = env.action_mapping.commands(a.numpy())
+        obs, reward, dones, extras = env.step_commands(base_command, arm_targets, a)
+        got = (obs["policy"], obs["critic"], reward, dones, extras["constraints"])
+        for x, y in zip(got, expected):
+            torch.testing.assert_close(x, y, rtol=1e-4, atol=1e-4)
+        torch.testing.assert_close(env.task.base_command.numpy(), base_command.astype(np.float32))
+    # without the policy's actions, the commands still go where the mapping writes its own; the history records zeros
+    base_command, arm_targets = env.action_mapping.commands(actions[0].numpy())
+    obs, _, _, _ = env.step_commands(base_command, arm_targets)
+    torch.testing.assert_close(env.task.arm_command.numpy(), arm_targets.astype(np.float32))
+    assert not obs["policy"][:, 43:54].any()
+    with pytest.raises(ValueError, match="finite"):
+        env.step_commands(np.full((4, 6), np.nan), arm_targets)

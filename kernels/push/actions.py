@@ -3,6 +3,8 @@
 The mapping is defined once, in numpy, by ``dynpush.runtime.actions`` (the deployment runtime applies it to the ONNX
 output); this kernel is the same formula for all worlds on the simulator's device, launched with the parameters of
 ``PushEnv.action_mapping``, and ``tests/test_action_mapping.py`` checks that both agree on random actions.
+``apply_commands`` is the entry for commands that were mapped outside (``PushEnv.step_commands``, sim-to-sim): it
+writes them where ``process_actions`` writes its own and records the caller's actions in the action history.
 """
 
 import warp as wp
@@ -11,6 +13,15 @@ from ..common import clipped_action
 from .views import NUM_ACTIONS, NUM_ARM_JOINTS, NUM_BASE_COMMANDS, PushTask, RobotView
 
 wp.set_module_options({"enable_backward": False})
+
+
+@wp.func
+def record_actions(raw_actions: wp.array2d(dtype=float), task: PushTask, clip: float, w: int):
+    """Shifts world ``w``'s action history: ``last_actions = actions``, ``actions = clip(raw_actions)`` (a
+    non-finite raw action counts as zero)."""
+    for i in range(NUM_ACTIONS):
+        task.last_actions[w, i] = task.actions[w, i]
+        task.actions[w, i] = clipped_action(raw_actions[w, i], clip)
 
 
 @wp.kernel
@@ -32,13 +43,36 @@ def process_actions(
     clipped to ``+-clip``. Non-finite actions count as zero, so that one diverged world cannot poison the batch.
     """
     w = wp.tid()
-    for i in range(NUM_ACTIONS):
-        task.last_actions[w, i] = task.actions[w, i]
-        task.actions[w, i] = clipped_action(raw_actions[w, i], clip)
+    record_actions(raw_actions, task, clip, w)
     for i in range(NUM_BASE_COMMANDS):
         task.base_command[w, i] = base_default[i] + base_scale[i] * task.actions[w, i]
     start = robot.arm_q_start[w]
     for j in range(NUM_ARM_JOINTS):
         q_cmd = task.arm_default[j] + arm_scale * task.actions[w, NUM_BASE_COMMANDS + j]
+        task.arm_command[w, j] = q_cmd
+        joint_target_q[start + j] = q_cmd
+
+
+@wp.kernel
+def apply_commands(
+    raw_actions: wp.array2d(dtype=float),
+    base_command: wp.array2d(dtype=float),
+    arm_targets: wp.array2d(dtype=float),
+    robot: RobotView,
+    task: PushTask,
+    clip: float,
+    joint_target_q: wp.array(dtype=float),
+):
+    """Commands given as they are: ``task.base_command = base_command`` (6, as in ``process_actions``) and
+    ``task.arm_command`` and the arm's joint position drives ``= arm_targets`` [rad]; the action history is shifted
+    with ``raw_actions`` as in ``process_actions`` (the policy output behind the commands, zeros when the caller has
+    none), for the action terms (the ``last_actions`` observation, the action-rate reward and arm-rate constraint)."""
+    w = wp.tid()
+    record_actions(raw_actions, task, clip, w)
+    for i in range(NUM_BASE_COMMANDS):
+        task.base_command[w, i] = base_command[w, i]
+    start = robot.arm_q_start[w]
+    for j in range(NUM_ARM_JOINTS):
+        q_cmd = arm_targets[w, j]
         task.arm_command[w, j] = q_cmd
         joint_target_q[start + j] = q_cmd

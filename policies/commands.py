@@ -44,19 +44,18 @@ MOVED_EVAL_OPTIONS = {
 def _train(args: argparse.Namespace) -> int:
     from dynpush.sim.config import ConfigError
 
-    from .locomotion_train import LocomotionTrainConfig
-    from .train import TrainConfig
+    from .tasks import TASKS
     from .training import apply_recipe, launch_processes, run_config, train
 
     started = args.launched_at or time.time()  # --hours counts from the user's launch
     argv = args.argv[args.argv.index("train") + 1 :]
     command = args.launched_as or shlex.join(["dynpush", "train", *argv])  # recorded in the run's launches.jsonl
-    config_class = {"push": TrainConfig, "locomotion": LocomotionTrainConfig}[args.task]
+    task = TASKS[args.task]
     if args.recipe and args.resume:
         raise ConfigError("--recipe configures a new run; --resume continues a run with its own config.json")
-    cfg = apply_recipe(config_class.preset_config(args.preset), Path(args.recipe) if args.recipe else None,
+    cfg = apply_recipe(task.config_class().preset_config(args.preset), Path(args.recipe) if args.recipe else None,
                        args.set or [])
-    name = args.name or (args.preset if args.task == "push" else f"{args.task}_{args.preset}")
+    name = args.name or task.run_prefix + args.preset
     extend_to = None
     if args.resume and args.set:  # a resumed run keeps its config.json; only its length may change
         fields = sorted({item.split("=", 1)[0] for item in args.set})
@@ -98,20 +97,10 @@ def _imitate(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from .export import export_policy, load_run_config
-    from .locomotion_train import LocomotionTrainConfig
-    from .onnx_policy import OnnxPolicy
+    from .tasks import task_of_run
 
-    if isinstance(load_run_config(Path(args.run)), LocomotionTrainConfig):
-        from .locomotion_export import export_locomotion
-
-        path = export_locomotion(Path(args.run), args.checkpoint, Path(args.out) if args.out else None)
-        print(f"{path}: obs [1, 61] -> leg actions [1, 12] (runtime section: locomotion.mode onnx)")
-        return 0
-    path = export_policy(Path(args.run), args.checkpoint, Path(args.out) if args.out else None)
-    contract = OnnxPolicy(path).contract
-    print(f"{path}: obs [1, 54] -> actions [1, 11], dynpush {contract.dynpush_version},"
-          f" training config sha256 {contract.training_config_sha256[:12]}")
+    task = task_of_run(Path(args.run))
+    print(task.exported(task.export(Path(args.run), args.checkpoint, Path(args.out) if args.out else None)))
     return 0
 
 
@@ -132,17 +121,12 @@ def _checked_policy(args: argparse.Namespace, task: str) -> Path:
     file stops with one line naming it, a policy of the other task with one line naming the command that evaluates it
     (:class:`~dynpush.errors.UserError`)."""
     from dynpush.errors import UserError
-    from dynpush.runtime.locomotion_contract import LOCOMOTION_CONTRACT_KEY
-    from dynpush.sim.onnx_session import load_onnx, read_metadata
+
+    from .tasks import TASKS, task_of_onnx
 
     policy = Path(args.policy)
-    locomotion = LOCOMOTION_CONTRACT_KEY in read_metadata(load_onnx(policy))
-    if task == "push" and locomotion:
-        raise UserError(f"{policy} is a locomotion policy: evaluate it with dynpush eval-locomotion"
-                        f" (dynpush {args.command} takes a push policy)")
-    if task == "locomotion" and not locomotion:
-        raise UserError(f"{policy} is not a locomotion policy (no {LOCOMOTION_CONTRACT_KEY} metadata): evaluate a push"
-                        f" policy with dynpush eval (also dynpush scenario, dynpush footprints)")
+    if task_of_onnx(policy) is not TASKS[task]:
+        raise UserError(TASKS[task].refusal(policy, args.command))
     return policy
 
 
@@ -241,24 +225,14 @@ def _curve(args: argparse.Namespace) -> int:
 
 
 def _ship(args: argparse.Namespace) -> int:
-    from dynpush.shipped import LOCOMOTION_DIR, SHIPPED_DIR
-
-    from .export import load_run_config
-    from .locomotion_train import LocomotionTrainConfig
     from .ship import ship
+    from .tasks import task_of_run
 
-    locomotion = isinstance(load_run_config(Path(args.run)), LocomotionTrainConfig)
-    out = Path(args.to) if args.to else LOCOMOTION_DIR if locomotion else SHIPPED_DIR
+    task = task_of_run(Path(args.run))
+    out = Path(args.to) if args.to else task.shipped_dir
     record = ship(Path(args.run), out, args.checkpoint, args.episodes, args.seed, args.worlds)
-    evaluation = record["evaluation"]
     trained = f"shipped {record['run']}/{record['checkpoint']} ({record['iterations']} iterations, {record['training_wall_clock_h']:.2f} h)"
-    if locomotion:
-        print(f"{trained}: tracking RMS " + ", ".join(f"{name} {value:.3f} {evaluation['units'][name]}"
-                                                    for name, value in evaluation["tracking_rms"].items())
-              + f", fell {evaluation['fell_percent']:.1f} % of {evaluation['worlds']} worlds; wrote {out}")
-    else:
-        print(f"{trained}: success {evaluation['success_percent']:.2f} %, toppled {evaluation['toppled_percent']:.2f} %"
-              f" over {evaluation['episodes']} episodes; wrote {out}")
+    print(f"{trained}: {task.shipped_summary(record['evaluation'])}; wrote {out}")
     return 0
 
 
@@ -281,9 +255,11 @@ def _common(p: argparse.ArgumentParser, out: str, policy: str = "push policy.onn
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Adds this package's subcommands to the ``dynpush`` parser."""
+    from .tasks import TASKS
+
     p = subparsers.add_parser("train", help="train a push (or locomotion) policy with CaT-PPO"
                                             " (checkpoints and tensorboard in runs/NAME)")
-    p.add_argument("--task", choices=("push", "locomotion"), default="push",
+    p.add_argument("--task", choices=tuple(TASKS), default="push",
                    help="push: the goal-pushing policy (tracked base); locomotion: the legged 6D-command policy (MuJoCo-Warp)")
     p.add_argument("--preset", default="cpu", help="cpu (2-core machine) or paper (4096 envs, 20000 iterations, GPU)")
     p.add_argument("--name", default=None, help="run name (default: the preset)")

@@ -18,13 +18,10 @@ from pathlib import Path
 from dynpush.errors import MissingFileError
 
 from .checkpoint_file import read_checkpoint
-from .evaluate import EvalConfig, evaluate
-from .export import export_policy, load_run_config, resolve_checkpoint
-from .locomotion_eval import LocomotionEvalConfig, evaluate_locomotion
-from .locomotion_export import export_locomotion
-from .locomotion_train import LocomotionTrainConfig
+from .export import load_run_config, resolve_checkpoint
 from .onnx_policy import OnnxPolicy
 from .progress import imitation_summary, plot_learning_curve, training_records, wall_clock_hours
+from .tasks import task_of_run
 
 
 def read_launches(run_dir: Path) -> list[dict]:
@@ -92,13 +89,12 @@ def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: 
     checkpoint_path = resolve_checkpoint(run_dir, checkpoint)
     record = provenance(run_dir, checkpoint_path)
     out_dir.mkdir(parents=True, exist_ok=True)
-    if isinstance(load_run_config(run_dir), LocomotionTrainConfig):
-        record["evaluation"] = _ship_locomotion(run_dir, checkpoint_path, out_dir, locomotion_worlds, seed)
-        paper_success, source = None, None
-    else:
-        record |= _ship_push(run_dir, checkpoint_path, out_dir, episodes, seed)
-        paper_success = record["evaluation"]["paper"]["success_rate"]
-        source = record["launches"][0].get("init_from")  # a run started with --init-from: its DAgger rounds come first
+    record |= task_of_run(run_dir).ship_files(run_dir, checkpoint_path, out_dir, episodes=episodes,
+                                              worlds=locomotion_worlds, seed=seed)
+    paper = record["evaluation"].get("paper")  # a push run's: its curve marks the paper's success rate
+    # a push run started with --init-from: the DAgger rounds of the run it started from come first in its curve
+    source = record["launches"][0].get("init_from") if paper else None
+    paper_success = paper["success_rate"] if paper else None
     plot_learning_curve(run_dir, out_dir / "learning_curve.png", paper_success, record["iterations"],
                         imitation_run=Path(source).parent if source else None)
     # The config the export embedded: the run's config.json as read today (an older run's gets the sections and fields
@@ -107,23 +103,3 @@ def ship(run_dir: Path, out_dir: Path, checkpoint: str | None = None, episodes: 
     (out_dir / "training.json").write_text(json.dumps(record, indent=2))
     return record
 
-
-def _ship_push(run_dir: Path, checkpoint_path: Path, out_dir: Path, episodes: int, seed: int) -> dict:
-    """policy.onnx and eval.json / eval.png; the training.json entries they add."""
-    policy_path = export_policy(run_dir, checkpoint_path.name, out_dir / "policy.onnx")
-    result = evaluate(policy_path, EvalConfig(episodes=episodes, seed=seed), out_dir)
-    return {
-        "training_config_sha256": OnnxPolicy(policy_path).contract.training_config_sha256,
-        "evaluation": {"episodes": result["episodes"], "success_percent": result["success_rate"],
-                       "toppled_percent": result["toppled_rate"],
-                       "constraint_violation_percent": result["constraint_violation_percent"],
-                       "paper": result["paper"]},
-    }
-
-
-def _ship_locomotion(run_dir: Path, checkpoint_path: Path, out_dir: Path, worlds: int, seed: int) -> dict:
-    """locomotion.onnx and locomotion_eval.json / .png; the training.json evaluation entry."""
-    policy_path = export_locomotion(run_dir, checkpoint_path.name, out_dir / "locomotion.onnx")
-    result = evaluate_locomotion(policy_path, LocomotionEvalConfig(num_envs=worlds, seed=seed), out_dir)
-    return {key: result[key] for key in ("worlds", "seconds_per_command", "fell_percent", "tracking_rms", "units",
-                                         "violated_percent_of_steps")}

@@ -69,10 +69,9 @@ def _exported_push(path: Path) -> str:
 def _ship_push(run_dir: Path, checkpoint_path: Path, out_dir: Path, episodes: int, worlds: int, seed: int) -> dict:
     """policy.onnx and eval.json / eval.png of ``episodes`` episodes (``dynpush eval``)."""
     from .evaluate import EvalConfig, evaluate
-    from .export import export_policy
     from .onnx_policy import OnnxPolicy
 
-    policy_path = export_policy(run_dir, checkpoint_path.name, out_dir / "policy.onnx")
+    policy_path = _export_push(run_dir, checkpoint_path.name, out_dir / "policy.onnx")
     result = evaluate(policy_path, EvalConfig(episodes=episodes, seed=seed), out_dir)
     return {
         "training_config_sha256": OnnxPolicy(policy_path).contract.training_config_sha256,
@@ -86,9 +85,8 @@ def _ship_push(run_dir: Path, checkpoint_path: Path, out_dir: Path, episodes: in
 def _ship_locomotion(run_dir: Path, checkpoint_path: Path, out_dir: Path, episodes: int, worlds: int, seed: int) -> dict:
     """locomotion.onnx and locomotion_eval.json / .png on ``worlds`` worlds (``dynpush eval-locomotion``)."""
     from .locomotion_eval import LocomotionEvalConfig, evaluate_locomotion
-    from .locomotion_export import export_locomotion
 
-    policy_path = export_locomotion(run_dir, checkpoint_path.name, out_dir / "locomotion.onnx")
+    policy_path = _export_locomotion(run_dir, checkpoint_path.name, out_dir / "locomotion.onnx")
     result = evaluate_locomotion(policy_path, LocomotionEvalConfig(num_envs=worlds, seed=seed), out_dir)
     return {"evaluation": {key: result[key] for key in ("worlds", "seconds_per_command", "fell_percent",
                                                         "tracking_rms", "units", "violated_percent_of_steps")}}

@@ -1,12 +1,20 @@
-"""Goal curricula for training (allowed levers of the CPU budget; the task itself is unchanged).
+"""Training curricula (allowed levers of the CPU budget; the task itself is unchanged).
 
-Episodes are drawn as in the paper, but the goal asks for only ``d`` of the drawn yaw change
+Goal difficulty: episodes are drawn as in the paper, but the goal asks for only ``d`` of the drawn yaw change
 (``PushEnv.set_goal_difficulty``: goal yaw ``yaw_object + d * dyaw``; the goal position is the drawn
 one). Scaling the goal *distance* as well was tried and fails: at small distances a robot that never
 touches the object succeeds often, so the policy learns to stay away.
-After every iteration the difficulty rises by ``step`` when the success rate of the episodes that
-ended during it exceeds ``promote_above``, and falls by ``step`` below ``demote_below``. Evaluation
-and export never use it: an environment starts at difficulty 1.
+
+Object mass: the objects' masses are drawn from ``[m_low, m_high(d)]`` with ``m_high`` rising from ``initial_max`` to
+the configured ``randomization.mass`` maximum (``PushEnv.set_object_mass_range``). Our arm's PD joints yield
+under a heavy object: pushing one takes the legs, the base or a folded arm, and each such push is a collision that
+CaT terminates; with the paper's collision ``p_max`` of 1.0 a policy learning from scratch on 1-10 kg objects learns
+to keep away, while on 1-2 kg objects it learns to push (docs/ppo_fine_tuning.md).
+
+Both levels follow the training success rate (:class:`SuccessGatedLevel`): after every iteration a level rises by
+``step`` when the success rate of the episodes that ended during it (over all processes) exceeds ``promote_above``,
+and falls by ``step`` below ``demote_below``. Evaluation and export never use them: an environment starts with the
+paper's goals and the configured masses.
 
 Near-goal starts (a start-state or "reverse" curriculum, Florensa et al. 2017): a share of the training resets
 draws the goal next to the object's start with the yaw off by a drawn angle (``PushEnv.set_near_goal_starts``),
@@ -23,14 +31,16 @@ from dynpush.sim.config import ConfigError
 
 
 @dataclass
-class GoalCurriculumConfig:
+class SuccessGatedLevel:
+    """A training difficulty in ``[initial, 1]`` (1: the paper's task) that follows the training success rate."""
+
     enabled: bool = False
-    initial: float = 0.0  # the goal keeps the object's start yaw: push to a position first
+    initial: float = 0.0
     step: float = 0.05
     promote_above: float = 0.3
     demote_below: float = 0.1
 
-    def validate(self, prefix: str = "curriculum") -> None:
+    def validate(self, prefix: str) -> None:
         for name in ("initial", "step", "promote_above", "demote_below"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ConfigError(f"{prefix}.{name} must lie in [0, 1], got {getattr(self, name)!r}")
@@ -46,6 +56,35 @@ class GoalCurriculumConfig:
         if success_rate < self.demote_below:
             return max(self.initial, difficulty - self.step)
         return difficulty
+
+
+@dataclass
+class GoalCurriculumConfig(SuccessGatedLevel):
+    """At difficulty ``d`` the goal asks for ``d`` of the drawn yaw change; ``initial`` 0: push to a position first."""
+
+    def validate(self, prefix: str = "curriculum") -> None:
+        super().validate(prefix)
+
+
+@dataclass
+class ObjectMassCurriculumConfig(SuccessGatedLevel):
+    """At difficulty ``d`` the object's mass is drawn from ``[m_low, initial_max + d (m_high - initial_max)]``, with
+    ``(m_low, m_high)`` the configured ``randomization.mass``. The defaults are ours, not the paper's."""
+
+    initial_max: float = 2.0  # [kg] the heaviest object at difficulty 0
+    step: float = 0.025  # 0.2 kg of the 8 kg between 2 and 10 kg
+    promote_above: float = 0.2
+    demote_below: float = 0.05
+
+    def validate(self, prefix: str = "mass_curriculum", configured: tuple[float, float] = (1.0, 10.0)) -> None:
+        super().validate(prefix)
+        if not configured[0] <= self.initial_max <= configured[1]:
+            raise ConfigError(f"{prefix}.initial_max must lie in env.randomization.mass {tuple(configured)} kg,"
+                              f" got {self.initial_max!r}")
+
+    def mass_range(self, difficulty: float, configured: tuple[float, float]) -> tuple[float, float]:
+        """The (low, high) [kg] object masses at ``difficulty``, within the ``configured`` range."""
+        return configured[0], self.initial_max + difficulty * (configured[1] - self.initial_max)
 
 
 @dataclass

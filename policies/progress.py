@@ -222,6 +222,7 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     rates = {k.rsplit("/", 1)[-1]: smooth(100.0 * series(k)) for k in episode_keys}  # success, toppled; locomotion: fell
     colors = {"success": "tab:green", "toppled": "tab:red", "fell": "tab:brown"}
     difficulty = series("/curriculum/goal_difficulty")
+    mass_max = series("/curriculum/object_mass_max")
     evaluations = read_evaluations(run_dir)
     rows = (4 if records else 1) + (2 if evaluations else 0)  # a DAgger-only run: rates only
     fig = Figure(figsize=(8.0, (9.5 if records else 3.5) + (4.5 if evaluations else 0.0)), layout="constrained")
@@ -236,6 +237,8 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
         ax_rate.axhline(paper_success_percent, color="tab:green", ls=":", label=f"paper success {paper_success_percent} %")
     if np.isfinite(difficulty).any():
         ax_rate.plot(hours, 100.0 * difficulty, color="gray", ls="--", label="curriculum goal difficulty x 100")
+    if np.isfinite(mass_max).any():
+        ax_rate.plot(hours, 10.0 * mass_max, color="tab:orange", ls="--", label="curriculum heaviest object [kg] x 10")
     if rounds:
         ax_rate.plot(round_hours, [100.0 * r["success_rate"] for r in rounds], "o-", color="tab:green", ms=3, alpha=0.6,
                      label="DAgger round: success (noisy rollouts, expert share 0.5^round)")

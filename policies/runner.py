@@ -25,7 +25,7 @@ from rsl_rl.runners import OnPolicyRunner
 
 from dynpush.policies.cat_ppo import CaTPPO
 from dynpush.policies.checkpoint_file import CheckpointError, read_checkpoint
-from dynpush.policies.curriculum import GoalCurriculumConfig, NearGoalStartConfig
+from dynpush.policies.curriculum import GoalCurriculumConfig, NearGoalStartConfig, ObjectMassCurriculumConfig
 from dynpush.policies.progress import ProgressLogger
 from dynpush.policies.expert_regularization import ExpertImitationLoss
 from dynpush.policies.run_folder import save_checkpoint
@@ -91,6 +91,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             raise TypeError(f"CaTOnPolicyRunner needs a CaTPPO algorithm, got {type(self.alg).__name__}.")
         self.schedule_cfg = ScheduleConfig.from_dict(train_cfg.get("schedule", {}))
         self.curriculum = GoalCurriculumConfig(**train_cfg.get("curriculum", {}))
+        self.mass_curriculum = ObjectMassCurriculumConfig(**train_cfg.get("mass_curriculum", {}))
+        self.mass_difficulty = self.mass_curriculum.initial  # saved in checkpoints: the environment keeps no level
         self.near_goal_starts = NearGoalStartConfig(**train_cfg.get("near_goal_starts", {}))
         self.critic_warmup_iterations = train_cfg.get("critic_warmup_iterations", 0)
         self.critic_warmup_learning_rate = train_cfg.get("critic_warmup_learning_rate")
@@ -128,8 +130,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
                 if self.out_of_time(time_budget, evaluating):
                     raise TimeBudgetSpent
             iteration_start = time.time()
-            if self.curriculum.enabled:
-                self.apply_curriculum(fresh_run=it == 0)
+            if self.curriculum.enabled or self.mass_curriculum.enabled:
+                self.apply_curricula(fresh_run=it == 0)
             self._snapshot = {"iteration": it, **copy.deepcopy(self.training_state(next_iteration=it))}
             if evaluating:  # after the snapshot: an interrupted evaluation loses no iteration
                 seconds = self.evaluate(it)
@@ -199,13 +201,29 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             self.env.set_disturbance_scale(scale)
             self.logger.run_state["/curriculum/disturbance_scale"] = scale
 
-    def apply_curriculum(self, fresh_run: bool) -> None:
-        """Sets the goal difficulty from the success rate of the episodes that ended since the last call."""
-        success_rate = self.env.take_success_rate()
-        difficulty = self.curriculum.initial if fresh_run else self.curriculum.next_difficulty(
-            self.env.goal_difficulty_value, success_rate)
-        self.env.set_goal_difficulty(difficulty)
-        self.logger.run_state["/curriculum/goal_difficulty"] = difficulty
+    def apply_curricula(self, fresh_run: bool) -> None:
+        """Sets the goal difficulty and the object mass range from the success rate of the episodes that ended since
+        the last call, over all processes (every process then draws its episodes at the same level)."""
+        success_rate = self.training_success_rate()
+        if self.curriculum.enabled:
+            difficulty = self.curriculum.initial if fresh_run else self.curriculum.next_difficulty(
+                self.env.goal_difficulty_value, success_rate)
+            self.env.set_goal_difficulty(difficulty)
+            self.logger.run_state["/curriculum/goal_difficulty"] = difficulty
+        if self.mass_curriculum.enabled:
+            self.mass_difficulty = self.mass_curriculum.initial if fresh_run else self.mass_curriculum.next_difficulty(
+                self.mass_difficulty, success_rate)
+            low, high = self.mass_curriculum.mass_range(self.mass_difficulty, self.env.cfg.randomization.mass)
+            self.env.set_object_mass_range(low, high)
+            self.logger.run_state["/curriculum/object_mass_max"] = high
+
+    def training_success_rate(self) -> float | None:
+        """Success rate of the training episodes that ended since the last call, over all processes (None: none)."""
+        counts = torch.tensor(self.env.take_episode_counts(), dtype=torch.float64)
+        if self.is_distributed:
+            torch.distributed.all_reduce(counts)
+        ended, succeeded = counts.tolist()
+        return succeeded / ended if ended else None
 
     def apply_near_goal_starts(self) -> None:
         """Sets the training environment's near-goal starts (at every launch: a resumed run's environment starts with
@@ -219,7 +237,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         state and torch's random state."""
         saved = self.alg.save()
         saved["iter"] = next_iteration
-        saved["infos"] = {"env_state": self.env.state_dict(), "torch_rng": torch.get_rng_state()}
+        saved["infos"] = {"env_state": self.env.state_dict(), "torch_rng": torch.get_rng_state(),
+                          "mass_difficulty": self.mass_difficulty}
         return saved
 
     def save(self, path: str, infos: dict | None = None) -> None:
@@ -274,4 +293,5 @@ class CaTOnPolicyRunner(OnPolicyRunner):
                 self.env.set_goal_difficulty(float(infos["env_state"]["goal_difficulty"][0]))  # the curriculum goes on
         if "torch_rng" in infos:
             torch.set_rng_state(infos["torch_rng"])
+        self.mass_difficulty = infos.get("mass_difficulty", self.mass_curriculum.initial)
         return infos

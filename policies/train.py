@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
 from dynpush.sim.config import ConfigError, PushEnvConfig
 
-from .curriculum import GoalCurriculumConfig, NearGoalStartConfig
+from .curriculum import GoalCurriculumConfig, NearGoalStartConfig, ObjectMassCurriculumConfig
 from .expert_regularization import ExpertLabelledEnv
 from .fine_tune import MOVED_FIELDS, FineTuneConfig
 from .schedules import ConstraintCurriculumConfig
@@ -54,6 +54,9 @@ class TrainConfig:
     # (runner_cfg()["schedule"]["constraints"]); runs from scratch set it too (configs/recipes/long_run.txt).
     p_max_overrides: dict[str, tuple[float, float]] = field(default_factory=dict)
     curriculum: GoalCurriculumConfig = field(default_factory=GoalCurriculumConfig)
+    # Training objects from light to the configured masses (ours, policies/curriculum.py); evaluation draws from
+    # env.randomization.mass.
+    mass_curriculum: ObjectMassCurriculumConfig = field(default_factory=ObjectMassCurriculumConfig)
     # Training resets that start near the goal with the yaw off (ours, policies/curriculum.py); evaluation never
     # uses them: the evaluation environment is built from ``env`` alone (policies/trained_env.py).
     near_goal_starts: NearGoalStartConfig = field(default_factory=NearGoalStartConfig)
@@ -90,6 +93,7 @@ class TrainConfig:
     def validate(self) -> TrainConfig:
         self.env.validate()
         self.curriculum.validate()
+        self.mass_curriculum.validate(configured=self.env.randomization.mass)
         self.near_goal_starts.validate()
         if self.env.legged.enabled and not self.env.legged.locomotion_policy:
             raise ConfigError("env.legged.locomotion_policy must name a locomotion.onnx to train in legged mode"
@@ -149,6 +153,7 @@ class TrainConfig:
                                           **{name: (0.0, 0.0) for name in self.disabled_constraint_groups}}},
             },
             "curriculum": dataclasses.asdict(self.curriculum),
+            "mass_curriculum": dataclasses.asdict(self.mass_curriculum),
             "near_goal_starts": dataclasses.asdict(self.near_goal_starts),
             "critic_warmup_iterations": self.fine_tune.critic_warmup_iterations,
             "critic_warmup_learning_rate": self.fine_tune.critic_warmup_learning_rate,

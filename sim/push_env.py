@@ -149,6 +149,9 @@ class PushEnv(EnvBase, VecEnv):
         self.constraints = zeros((n, constraints_k.NUM_CONSTRAINTS))
         self.variant = zeros(n, int)
         self.goal_difficulty = wp.ones(1, dtype=float)  # 1: the paper's goal distribution
+        # (low, high) [kg] of the object masses drawn from now on: randomization.mass unless a training curriculum
+        # narrows it; evaluation and export, which never set it, draw from the configured range.
+        self.object_mass_range = wp.array([wp.vec2(*self.cfg.randomization.mass)], dtype=wp.vec2)
         # (share, radius [m], max_yaw [rad]) of near-goal starts, a training-only curriculum; share 0: the paper's
         # goal distribution, so evaluation and export, which never set it, use that.
         self.near_goal = zeros(1, wp.vec3)
@@ -283,7 +286,6 @@ class PushEnv(EnvBase, VecEnv):
         sp.surface_target = int(s.reach_target_on_surface)
         sp.friction = wp.vec2(*rnd.friction)
         sp.ground_friction = self.scene.ground_friction
-        sp.mass = wp.vec2(*rnd.mass)
         sp.com_fraction_lo = wp.vec3(rnd.com_fraction_x[0], rnd.com_fraction_y[0], rnd.com_fraction_z[0])
         sp.com_fraction_hi = wp.vec3(rnd.com_fraction_x[1], rnd.com_fraction_y[1], rnd.com_fraction_z[1])
         sp.size_lo = wp.vec3(rnd.size_x[0], rnd.size_y[0], rnd.size_z[0])
@@ -432,8 +434,8 @@ class PushEnv(EnvBase, VecEnv):
     def _reset_flagged(self) -> None:
         """Draws and starts new episodes for worlds with ``reset_flags != 0`` (inside the captured step)."""
         self._launch(sampling.sample_episodes, [self.reset_flags, self.cfg.seed, self.sampling_params, self.goal_difficulty,
-                                                self.near_goal, self.task, self.spec, self.near_goal_start,
-                                                self.near_goal_ended])
+                                                self.object_mass_range, self.near_goal, self.task, self.spec,
+                                                self.near_goal_start, self.near_goal_ended])
         self._start_flagged()
 
     def _start_flagged(self) -> None:
@@ -549,6 +551,20 @@ class PushEnv(EnvBase, VecEnv):
     def goal_difficulty_value(self) -> float:
         return float(self.goal_difficulty.numpy()[0])
 
+    def set_object_mass_range(self, low: float, high: float) -> None:
+        """Objects of episodes drawn from now on weigh U(``low``, ``high``) [kg], a sub-range of ``randomization.mass``
+        (a training curriculum, ``policies/curriculum.py``)."""
+        configured = self.cfg.randomization.mass
+        if not configured[0] <= low <= high <= configured[1]:
+            raise ConfigError(f"object mass range must lie within randomization.mass {configured} kg with low <= high,"
+                              f" got ({low!r}, {high!r})")
+        self.object_mass_range.fill_(wp.vec2(low, high))
+
+    @property
+    def object_mass_range_value(self) -> tuple[float, float]:
+        low, high = self.object_mass_range.numpy()[0]
+        return float(low), float(high)
+
     def set_near_goal_starts(self, share: float, radius: float, max_yaw: float) -> None:
         """Episodes drawn from now on start near their goal with probability ``share``: the goal uniform (by area)
         within ``radius`` [m] of the object's start, its yaw the object's plus U(-``max_yaw``, ``max_yaw``) [rad]
@@ -559,17 +575,17 @@ class PushEnv(EnvBase, VecEnv):
         self.near_goal.fill_(wp.vec3(share, radius, max_yaw))
         self._near_goal_share = share
 
-    def take_success_rate(self) -> float | None:
-        """Success rate of the episodes that ended since the last call (None if none ended)."""
-        ended, succeeded = self._episodes_ended, self._episodes_succeeded
+    def take_episode_counts(self) -> tuple[int, int]:
+        """(ended, succeeded): the episodes that ended since the last call, and how many of them succeeded."""
+        counts = self._episodes_ended, self._episodes_succeeded
         self._episodes_ended = self._episodes_succeeded = 0
-        return succeeded / ended if ended else None
+        return counts
 
     def _ended_episodes(self) -> torch.Tensor:
         return self.episode_success_t >= 0
 
     def _ended_episode_log(self, ended: torch.Tensor) -> dict[str, torch.Tensor]:
-        """Success and toppled at the end (counted for :meth:`take_success_rate`), and the near-goal split."""
+        """Success and toppled at the end (counted for :meth:`take_episode_counts`), and the near-goal split."""
         succeeded = (self.episode_success_t[ended] == 1).float()
         self._episodes_ended += int(succeeded.numel())
         self._episodes_succeeded += int(succeeded.sum())

@@ -423,7 +423,7 @@ def sampling_params(**overrides):
     full = (-math.pi, math.pi)
     values = dict(robot_radius=(1.2, 2.5), goal_radius=(0.0, 2.0), robot_bearing=full, goal_bearing=full,
                   object_yaw=full, goal_yaw=full, base_yaw=full, surface_target=1,
-                  friction=(0.4, 1.25), ground_friction=0.4, mass=(1.0, 10.0), com_fraction_lo=(-0.25, -0.25, -0.6),
+                  friction=(0.4, 1.25), ground_friction=0.4, com_fraction_lo=(-0.25, -0.25, -0.6),
                   com_fraction_hi=(0.25, 0.25, 0.25), size_lo=(0.25, 0.25, 0.4), size_hi=(0.75, 0.75, 1.0),
                   cylinder_probability=0.3, base_mass_offset=(-5.0, 5.0), push_interval_steps=(350.0, 500.0),
                   push_velocity=0.5, arm_joint_noise=0.2, base_height=0.5, frozen_joint_value=0.3)
@@ -449,14 +449,17 @@ def random_spec(rng, n):
     ))
 
 
-def sample_episodes(reset, seed, params, task, spec, difficulty=1.0, near_goal=(0.0, 0.0, 0.0), start_flags=None):
-    """Launches ``sampling.sample_episodes``; ``near_goal`` = (share, radius [m], max_yaw [rad]), ``start_flags`` the
-    worlds' near-goal flags before (default 0). Returns the near-goal flags (start, ended) after."""
+def sample_episodes(reset, seed, params, task, spec, difficulty=1.0, object_mass=(1.0, 10.0), near_goal=(0.0, 0.0, 0.0),
+                    start_flags=None):
+    """Launches ``sampling.sample_episodes``; ``object_mass`` = (low, high) [kg], ``near_goal`` = (share, radius [m],
+    max_yaw [rad]), ``start_flags`` the worlds' near-goal flags before (default 0). Returns the near-goal flags
+    (start, ended) after."""
     n = len(reset)
     start = arr(np.zeros(n) if start_flags is None else start_flags, int)
     ended = arr(np.full(n, -1), int)
     launch(sampling.sample_episodes, n, arr(reset, int), seed, params, arr([difficulty]),
-           wp.array([near_goal], dtype=wp.vec3, device=DEVICE), task, spec, start, ended)
+           wp.array([object_mass], dtype=wp.vec2, device=DEVICE), wp.array([near_goal], dtype=wp.vec3, device=DEVICE),
+           task, spec, start, ended)
     return start.numpy(), ended.numpy()
 
 
@@ -502,6 +505,24 @@ def test_goal_difficulty_scales_the_goal_yaw_change():
     close(wrap(goals[0.4][:, 2] - object_yaw), 0.4 * wrap(goals[1.0][:, 2] - object_yaw), atol=1e-4)
     close(goals[0.0][:, :2], goals[1.0][:, :2], atol=0)
     close(wrap(goals[0.0][:, 2] - object_yaw), 0.0, atol=1e-6)
+
+
+def test_object_mass_range_bounds_the_mass_and_nothing_else():
+    """Mass curriculum: a narrower (low, high) draws the mass uniform in it; every other draw is unchanged."""
+    n = 4000
+    out = {}
+    for mass in ((1.0, 10.0), (1.0, 2.5)):
+        _, task_np = random_state(np.random.default_rng(3), n)  # identical random streams for both ranges
+        task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(4), n))
+        sample_episodes(np.ones(n), 9, sampling_params(), task, spec, object_mass=mass)
+        out[mass] = read_struct(sampling.EpisodeSpec, spec)
+    light, full = out[(1.0, 2.5)], out[(1.0, 10.0)]
+    assert light["mass"].min() >= 1.0 and light["mass"].max() <= 2.5
+    assert_uniform((light["mass"] - 1.0) / 1.5, "mass in the narrowed range")
+    close((light["mass"] - 1.0) / 1.5, (full["mass"] - 1.0) / 9.0, atol=1e-5)  # the same draw, rescaled
+    for name in full:
+        if name != "mass":
+            close(light[name], full[name], atol=0, err_msg=name)
 
 
 def test_sample_episodes_draws_are_independent():

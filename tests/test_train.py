@@ -252,6 +252,37 @@ def test_p_max_overrides_replace_the_papers_curriculum_of_a_group():
         apply_overrides(TrainConfig.preset_config("cpu"), ["p_max_overrides={'collision': (0.1, 2.0)}"]).validate()
 
 
+def test_mass_curriculum_maps_its_level_onto_the_configured_masses():
+    from dynpush.policies.curriculum import ObjectMassCurriculumConfig
+
+    cfg = ObjectMassCurriculumConfig(enabled=True, initial_max=2.0)
+    assert cfg.mass_range(0.0, (1.0, 10.0)) == (1.0, 2.0)
+    assert cfg.mass_range(0.5, (1.0, 10.0)) == (1.0, 6.0)
+    assert cfg.mass_range(1.0, (1.0, 10.0)) == (1.0, 10.0)
+    assert cfg.next_difficulty(0.5, 0.25) == pytest.approx(0.525)  # promoted above 0.2
+    with pytest.raises(ConfigError, match=r"mass_curriculum.initial_max must lie in env.randomization.mass \(1.0, 10.0\)"):
+        apply_overrides(tiny(1), ["mass_curriculum.initial_max=0.5"]).validate()
+
+
+def test_mass_curriculum_run_starts_light_resumes_its_level_and_eval_envs_keep_the_masses(tmp_path):
+    from dynpush.sim.config import PushEnvConfig
+    from dynpush.sim.push_env import PushEnv
+
+    run = tmp_path / "run"
+    cfg = apply_overrides(tiny(2), ["mass_curriculum.enabled=True", "mass_curriculum.initial_max=3.0"])
+    runner = train(cfg, run)
+    assert runner.env.object_mass_range_value == (1.0, 3.0)
+    assert PushEnv(PushEnvConfig(num_envs=1)).object_mass_range_value == (1.0, 10.0)
+    with pytest.raises(ConfigError, match="object mass range must lie within randomization.mass"):
+        runner.env.set_object_mass_range(0.5, 2.0)
+    checkpoint = run / "model_1.pt"
+    saved = torch.load(checkpoint, weights_only=False)
+    saved["infos"]["mass_difficulty"] = 0.5  # a level reached later in a run
+    torch.save(saved, checkpoint)
+    resumed = train(cfg, run, resume=True, extend_to=3)  # too short for an episode to end: the level holds
+    assert resumed.mass_difficulty == 0.5 and resumed.env.object_mass_range_value == (1.0, 6.5)
+
+
 def test_resume_with_another_env_layout_starts_fresh_episodes(tmp_path, capsys):
     """A run saved by 2 processes holds rank 0's shard only; resumed by 1 process it cannot restore it."""
     run = tmp_path / "run"

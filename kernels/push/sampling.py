@@ -31,7 +31,6 @@ class SamplingParams:
     surface_target: int  # 0: reach target at the centroid (ablation)
     friction: wp.vec2  # combined object-floor coefficient
     ground_friction: float  # the floor's own coefficient (Newton averages the two)
-    mass: wp.vec2  # [kg]
     com_fraction_lo: wp.vec3
     com_fraction_hi: wp.vec3
     size_lo: wp.vec3  # [m]
@@ -123,6 +122,7 @@ def sample_episodes(
     seed: int,
     params: SamplingParams,
     goal_difficulty: wp.array(dtype=float),
+    object_mass: wp.array(dtype=wp.vec2),
     near_goal: wp.array(dtype=wp.vec3),
     task: PushTask,
     spec: EpisodeSpec,
@@ -135,6 +135,9 @@ def sample_episodes(
     reorientation the goal asks for: goal yaw ``yaw_object + d * wrap(yaw_goal - yaw_object)``; the
     goal position is always the drawn one (a position scaled toward the start would make waiting
     next to the object a success). At 1 the goal is exactly the drawn one.
+
+    ``object_mass[0]`` = (low, high) [kg]: the range the object's mass is drawn from, uniform (the configured
+    ``randomization.mass`` unless a training curriculum narrows it).
 
     ``near_goal[0]`` = (share, radius [m], max_yaw [rad]) (a training-only start-state curriculum; share 0 is the
     paper's task): with probability ``share`` a world's goal is instead drawn near the object's start, uniform (by
@@ -156,7 +159,7 @@ def sample_episodes(
         d = wp.vec3(d[0], d[0], d[2])
     spec.shape[w] = shape
     spec.dims[w] = d
-    spec.mass[w] = uniform(wp.randf(rng), params.mass)
+    spec.mass[w] = uniform(wp.randf(rng), object_mass[0])
     spec.com_o[w] = wp.vec3(
         wp.randf(rng, params.com_fraction_lo[0], params.com_fraction_hi[0]) * d[0],
         wp.randf(rng, params.com_fraction_lo[1], params.com_fraction_hi[1]) * d[1],

@@ -36,8 +36,8 @@ base, end-effector and object of every episode are drawn as ``dynpush play`` dra
 Clock: real time (an absolute-deadline ticker at the control rate), or lock-step (one step per command
 received, for tests). In real time the simulator reports its own pace, ``{"event": "clock", "deadline": k,
 "steps": n}`` (at a wait for deadline ``k``, after ``n`` steps) about every ``CLOCK_REPORT_PERIODS`` control
-periods and with ``done`` (``"clock": [k, n]`` of its last wait); the runtime's side judges from them whether it kept
-the control rate (``dynpush.runtime.sim2sim.RateCheck``).
+periods (:class:`ClockReporter`) and with ``done`` (``"clock": [k, n]`` of its last wait); the runtime's side
+judges from them whether it kept the control rate (``dynpush.runtime.sim2sim.RateCheck``).
 """
 
 from __future__ import annotations
@@ -47,6 +47,7 @@ import json
 import math
 import sys
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -74,6 +75,29 @@ from .trained_env import env_config_for
 
 OPERATING_STATES = (State.PUSH, State.HOLD, State.MOCAP_LOST)
 CLOCK_REPORT_PERIODS = 10  # real time: a clock report every 10 control periods (0.2 s at 50 Hz), 1/5 of a window
+
+
+class ClockReporter:
+    """Real time: the simulator's pace, as the runtime's ``RateCheck`` reads it.
+
+    At each wait for a control deadline, :meth:`record` takes the deadline's index (control periods since the
+    ticker's first) and the steps taken before it, and emits a ``clock`` event when ``every`` periods have passed
+    since the last one. A deadline index that runs ahead of the steps means the ticker skipped deadlines: stepping
+    is too slow for the control rate.
+    """
+
+    def __init__(self, emit_event: Callable[[dict], None], every: int = CLOCK_REPORT_PERIODS):
+        self._emit = emit_event
+        self.every = every  # [control periods]
+        self.last: tuple[int, int] | None = None  # (deadline index, steps before it) of the last wait
+        self._reported = -every  # the first wait is reported
+
+    def record(self, deadline: int, steps: int) -> None:
+        """One wait: ``deadline`` [control periods], ``steps`` [simulator steps taken before it]."""
+        self.last = (deadline, steps)
+        if deadline - self._reported >= self.every:
+            self._emit({"event": "clock", "deadline": deadline, "steps": steps})
+            self._reported = deadline
 
 
 @dataclass
@@ -150,8 +174,7 @@ class SimRobot:
         self.malformed_commands = 0
         self.step = 0
         self._seq = 0
-        self.clock: tuple[int, int] | None = None  # real time: (deadline index, steps before it) of the last wait
-        self._clock_reported = -CLOCK_REPORT_PERIODS
+        self.clock = ClockReporter(emit)  # real time only: lock-step waits for commands, not deadlines
 
     # ------------------------------------------------------------------ commands in
     def receive_commands(self) -> None:
@@ -225,17 +248,9 @@ class SimRobot:
     # ------------------------------------------------------------------ the run
     def _wait(self, ticker: Ticker | None) -> None:
         if ticker is not None:
-            self._clock_report(ticker.wait().index)
+            self.clock.record(ticker.wait().index, self.step)
         elif not self.endpoint.wait_readable(self.cfg.command_timeout_s):
             raise TimeoutError(f"lock-step: no command from the runtime for {self.cfg.command_timeout_s} s")
-
-    def _clock_report(self, deadline: int) -> None:
-        """Real time: records this wait's deadline and the steps taken before it; a ``clock`` event when due. A
-        deadline index that runs ahead of the steps means the ticker skipped deadlines: stepping is too slow."""
-        self.clock = (deadline, self.step)
-        if deadline - self._clock_reported >= CLOCK_REPORT_PERIODS:
-            emit({"event": "clock", "deadline": deadline, "steps": self.step})
-            self._clock_reported = deadline
 
     def _start_episode_record(self) -> tuple[TrajectoryObserver | None, dict]:
         """At an episode's start: its object and goal, and a path recorder when a picture is asked for."""
@@ -285,7 +300,7 @@ class SimRobot:
         if paths:
             plot_play({"policy": self.cfg.policy, "episodes": rows}, concatenate_episodes(paths), Path(self.cfg.trajectory_png))
         emit({"event": "done", "steps": self.step, "episodes": results, "runtime_stopped": results < self.cfg.episodes,
-              "malformed_commands": self.malformed_commands, "clock": self.clock,
+              "malformed_commands": self.malformed_commands, "clock": self.clock.last,
               "trajectory_png": self.cfg.trajectory_png if paths else None})
 
     def close(self) -> None:

@@ -225,3 +225,49 @@ def test_options_refuse_a_bad_rate_check():
         SimToSimOptions(policy="p.onnx", on_slow="ignore").validate()
     with pytest.raises(RuntimeConfigError, match=r"min_rate must lie in \(0, 1\]"):
         SimToSimOptions(policy="p.onnx", min_rate=0.0).validate()
+
+
+# ---------------------------------------------------------------------- the simulator's side, on a simulated clock
+
+
+class SteppedClock:
+    """A clock that moves only when told: ``sleep_until`` jumps to the deadline, a simulator step adds its cost."""
+
+    def __init__(self):
+        self.t = 0.0  # [s]
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep_until(self, deadline: float) -> None:
+        self.t = max(self.t, deadline)
+
+
+def simulator_events(step_periods: float, periods: int) -> list[dict]:
+    """The ``SIM2SIM`` events of a real-time simulator whose every step costs ``step_periods`` control periods, over
+    about ``periods`` periods: its real ticker and clock reports, time simulated (no machine speed in the test)."""
+    from dynpush.policies.sim2sim import ClockReporter
+    from dynpush.runtime.timing import Ticker
+
+    period = 0.02  # [s]
+    clock, events = SteppedClock(), []
+    ticker, reporter, steps = Ticker(clock, period), ClockReporter(events.append), 0
+    while clock.t < periods * period:
+        reporter.record(ticker.wait().index, steps)
+        clock.t += step_periods * period  # the step itself
+        steps += 1
+    return events + [{"event": "done", "steps": steps, "clock": list(reporter.last)}]
+
+
+@pytest.mark.parametrize("step_periods, slow", [(0.3, False), (0.95, False), (2.8, True)])
+def test_a_slowed_simulator_reports_a_pace_the_check_catches(step_periods, slow):
+    """2.8 periods a step is the issue's run (233 steps for 651 ticks, 36 %); a step within its period is on time."""
+    events = simulator_events(step_periods, 300)
+    check, stop, episodes, done = RateCheck(0.9, WINDOW, 50.0), threading.Event(), [], []
+    sim2sim._read_events(FakeProcess(events), episodes, done, check, stop)
+    assert stop.is_set() and check.fell_behind == slow and check.windows >= 1
+    if slow:
+        assert check.slow_rate == pytest.approx(1.0 / 2.8, abs=0.02)
+        assert check.message("lockstep").startswith("sim2sim: the simulator keeps 36 % of the 50 Hz control rate")
+    else:
+        assert check.finish() is False and check.rate() == 1.0 and len(done) == 1

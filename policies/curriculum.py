@@ -20,6 +20,11 @@ Near-goal starts (a start-state or "reverse" curriculum, Florensa et al. 2017): 
 draws the goal next to the object's start with the yaw off by a drawn angle (``PushEnv.set_near_goal_starts``),
 where the shipped policy fails most (it ends 39 % of its episodes at the goal with the rotation off). Everything
 else is drawn as in the paper. An environment starts with share 0, so evaluation and export never use it.
+
+Starts behind the object: a share of the training resets puts the robot behind the object as seen from the goal,
+facing it (``PushEnv.set_behind_starts``), where a push toward the goal is one walk forward: from that start a
+policy learns to push from scratch within a few hundred iterations (``benchmarks/ppo_sanity.py``), while from the
+paper's starts, anywhere around the object and facing anywhere, it must first learn to walk round it.
 """
 
 from __future__ import annotations
@@ -98,5 +103,18 @@ class NearGoalStartConfig:
 
     def validate(self, prefix: str = "near_goal_starts") -> None:
         for name, high in (("share", 1.0), ("goal_radius", 2.0), ("max_yaw", math.pi)):
+            if not 0.0 <= getattr(self, name) <= high:
+                raise ConfigError(f"{prefix}.{name} must lie in [0, {high:g}], got {getattr(self, name)!r}")
+
+
+@dataclass
+class BehindStartConfig:
+    """Share and spread of the training resets that start behind the object; the defaults are ours, not the paper's."""
+
+    share: float = 0.0  # fraction of resets that start behind the object; 0: off, the paper's resets exactly
+    spread: float = 0.5  # [rad] max deviation of the robot's bearing and heading from the aligned ones
+
+    def validate(self, prefix: str = "behind_starts") -> None:
+        for name, high in (("share", 1.0), ("spread", math.pi)):
             if not 0.0 <= getattr(self, name) <= high:
                 raise ConfigError(f"{prefix}.{name} must lie in [0, {high:g}], got {getattr(self, name)!r}")

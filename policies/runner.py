@@ -25,7 +25,9 @@ from rsl_rl.runners import OnPolicyRunner
 
 from dynpush.policies.cat_ppo import CaTPPO
 from dynpush.policies.checkpoint_file import CheckpointError, read_checkpoint
-from dynpush.policies.curriculum import GoalCurriculumConfig, NearGoalStartConfig, ObjectMassCurriculumConfig
+from dynpush.policies.curriculum import (
+    BehindStartConfig, GoalCurriculumConfig, NearGoalStartConfig, ObjectMassCurriculumConfig,
+)
 from dynpush.policies.progress import ProgressLogger
 from dynpush.policies.expert_regularization import ExpertImitationLoss
 from dynpush.policies.run_folder import save_checkpoint
@@ -94,6 +96,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self.mass_curriculum = ObjectMassCurriculumConfig(**train_cfg.get("mass_curriculum", {}))
         self.mass_difficulty = self.mass_curriculum.initial  # saved in checkpoints: the environment keeps no level
         self.near_goal_starts = NearGoalStartConfig(**train_cfg.get("near_goal_starts", {}))
+        self.behind_starts = BehindStartConfig(**train_cfg.get("behind_starts", {}))
         self.critic_warmup_iterations = train_cfg.get("critic_warmup_iterations", 0)
         self.critic_warmup_learning_rate = train_cfg.get("critic_warmup_learning_rate")
         self.learning_rate = self.alg.learning_rate  # the configured one, restored after the warm-up
@@ -149,6 +152,9 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self.alg.on_rollout_start = on_rollout_start
         if self.near_goal_starts.share > 0:
             self.apply_near_goal_starts()
+        if self.behind_starts.share > 0:  # at every launch: a resumed run's environment starts with none
+            self.env.set_behind_starts(self.behind_starts.share, self.behind_starts.spread)
+            self.logger.run_state["/curriculum/behind_share"] = self.behind_starts.share
         try:
             super().learn(num_learning_iterations, init_at_random_ep_len)
         except TimeBudgetSpent:

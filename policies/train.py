@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
 from dynpush.sim.config import ConfigError, PushEnvConfig
 
-from .curriculum import GoalCurriculumConfig, NearGoalStartConfig, ObjectMassCurriculumConfig
+from .curriculum import BehindStartConfig, GoalCurriculumConfig, NearGoalStartConfig, ObjectMassCurriculumConfig
 from .expert_regularization import ExpertLabelledEnv
 from .fine_tune import MOVED_FIELDS, FineTuneConfig
 from .schedules import ConstraintCurriculumConfig
@@ -60,6 +60,8 @@ class TrainConfig:
     # Training resets that start near the goal with the yaw off (ours, policies/curriculum.py); evaluation never
     # uses them: the evaluation environment is built from ``env`` alone (policies/trained_env.py).
     near_goal_starts: NearGoalStartConfig = field(default_factory=NearGoalStartConfig)
+    # Training resets with the robot behind the object, facing it and the goal (ours, policies/curriculum.py).
+    behind_starts: BehindStartConfig = field(default_factory=BehindStartConfig)
     # Critic warm-up and the scripted pusher's imitation term: what matters only when a run starts from another
     # policy (--init-from) or is anchored to the expert (policies/fine_tune.py); the defaults are plain CaT-PPO.
     fine_tune: FineTuneConfig = field(default_factory=FineTuneConfig)
@@ -95,6 +97,7 @@ class TrainConfig:
         self.curriculum.validate()
         self.mass_curriculum.validate(configured=self.env.randomization.mass)
         self.near_goal_starts.validate()
+        self.behind_starts.validate()
         if self.env.legged.enabled and not self.env.legged.locomotion_policy:
             raise ConfigError("env.legged.locomotion_policy must name a locomotion.onnx to train in legged mode"
                               " (without one the legs hold their default targets)")
@@ -155,6 +158,7 @@ class TrainConfig:
             "curriculum": dataclasses.asdict(self.curriculum),
             "mass_curriculum": dataclasses.asdict(self.mass_curriculum),
             "near_goal_starts": dataclasses.asdict(self.near_goal_starts),
+            "behind_starts": dataclasses.asdict(self.behind_starts),
             "critic_warmup_iterations": self.fine_tune.critic_warmup_iterations,
             "critic_warmup_learning_rate": self.fine_tune.critic_warmup_learning_rate,
             "imitation_weight": tuple(self.fine_tune.imitation_weight),

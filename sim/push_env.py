@@ -158,6 +158,7 @@ class PushEnv(EnvBase, VecEnv):
         self.near_goal_start = zeros(n, int)  # 1: the world's episode started near its goal
         self.near_goal_ended = zeros(n, int)  # near_goal_start of the episode the world's last reset ended
         self._near_goal_share = 0.0  # the host's copy: episode statistics are split only while it is > 0
+        self.behind_start = zeros(1, wp.vec2)  # (share, spread [rad]) of starts behind the object; share 0: the paper's
         self._episodes_ended = 0
         self._episodes_succeeded = 0
         spec = sampling.EpisodeSpec()
@@ -434,8 +435,8 @@ class PushEnv(EnvBase, VecEnv):
     def _reset_flagged(self) -> None:
         """Draws and starts new episodes for worlds with ``reset_flags != 0`` (inside the captured step)."""
         self._launch(sampling.sample_episodes, [self.reset_flags, self.cfg.seed, self.sampling_params, self.goal_difficulty,
-                                                self.object_mass_range, self.near_goal, self.task, self.spec,
-                                                self.near_goal_start, self.near_goal_ended])
+                                                self.object_mass_range, self.near_goal, self.behind_start, self.task,
+                                                self.spec, self.near_goal_start, self.near_goal_ended])
         self._start_flagged()
 
     def _start_flagged(self) -> None:
@@ -574,6 +575,14 @@ class PushEnv(EnvBase, VecEnv):
                               f" {radius!r}, {max_yaw!r}")
         self.near_goal.fill_(wp.vec3(share, radius, max_yaw))
         self._near_goal_share = share
+
+    def set_behind_starts(self, share: float, spread: float) -> None:
+        """Episodes drawn from now on start with the robot behind the object, opposite the goal, with probability
+        ``share``; bearing and heading within ``spread`` [rad] of the aligned ones (a training-only start-state
+        curriculum; ``kernels/push/sampling.py``). Share 0 is the paper's task."""
+        if not (0.0 <= share <= 1.0 and 0.0 <= spread <= math.pi):
+            raise ConfigError(f"behind starts need share in [0, 1] and spread in [0, pi]; got {share!r}, {spread!r}")
+        self.behind_start.fill_(wp.vec2(share, spread))
 
     def take_episode_counts(self) -> tuple[int, int]:
         """(ended, succeeded): the episodes that ended since the last call, and how many of them succeeded."""

@@ -450,16 +450,16 @@ def random_spec(rng, n):
 
 
 def sample_episodes(reset, seed, params, task, spec, difficulty=1.0, object_mass=(1.0, 10.0), near_goal=(0.0, 0.0, 0.0),
-                    start_flags=None):
+                    behind=(0.0, 0.0), start_flags=None):
     """Launches ``sampling.sample_episodes``; ``object_mass`` = (low, high) [kg], ``near_goal`` = (share, radius [m],
-    max_yaw [rad]), ``start_flags`` the worlds' near-goal flags before (default 0). Returns the near-goal flags
-    (start, ended) after."""
+    max_yaw [rad]), ``behind`` = (share, spread [rad]), ``start_flags`` the worlds' near-goal flags before (default
+    0). Returns the near-goal flags (start, ended) after."""
     n = len(reset)
     start = arr(np.zeros(n) if start_flags is None else start_flags, int)
     ended = arr(np.full(n, -1), int)
     launch(sampling.sample_episodes, n, arr(reset, int), seed, params, arr([difficulty]),
            wp.array([object_mass], dtype=wp.vec2, device=DEVICE), wp.array([near_goal], dtype=wp.vec3, device=DEVICE),
-           task, spec, start, ended)
+           wp.array([behind], dtype=wp.vec2, device=DEVICE), task, spec, start, ended)
     return start.numpy(), ended.numpy()
 
 
@@ -523,6 +523,34 @@ def test_object_mass_range_bounds_the_mass_and_nothing_else():
     for name in full:
         if name != "mass":
             close(light[name], full[name], atol=0, err_msg=name)
+
+
+def test_behind_starts_put_the_robot_opposite_the_goal_facing_the_object():
+    """Start-state curriculum: at share 1 the base stands in the robot annulus at a bearing within ``spread`` of the
+    one opposite the goal, heading toward the object within ``spread``; the object and goal are the paper's draws;
+    at a share of 0.5 about half the worlds do."""
+    n, spread = 4000, 0.3
+    out = {}
+    for share in (0.0, 1.0, 0.5):
+        _, task_np = random_state(np.random.default_rng(3), n)  # identical random streams for every share
+        task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(4), n))
+        sample_episodes(np.ones(n), 9, sampling_params(), task, spec, behind=(share, spread))
+        out[share] = read_struct(sampling.EpisodeSpec, spec)
+    wrap = lambda a: np.arctan2(np.sin(a), np.cos(a))  # noqa: E731
+    paper, behind = out[0.0], out[1.0]
+    for name in paper:
+        if name != "base":
+            close(behind[name], paper[name], atol=0, err_msg=name)
+    base, goal = behind["base"].astype(np.float64), behind["goal"].astype(np.float64)
+    bearing_off = wrap(np.arctan2(base[:, 1], base[:, 0]) - np.arctan2(goal[:, 1], goal[:, 0]) - np.pi)
+    assert np.abs(bearing_off).max() <= spread + 1e-4 and np.abs(bearing_off).mean() > 0.5 * spread * 0.8
+    radius = np.linalg.norm(base[:, :2], axis=1)
+    assert radius.min() >= 1.2 - 1e-4 and radius.max() <= 2.5 + 1e-4
+    heading_off = wrap(base[:, 2] - np.arctan2(-base[:, 1], -base[:, 0]))
+    assert np.abs(heading_off).max() <= spread + 1e-4
+    assert_uniform((heading_off + spread) / (2 * spread), "heading about the one facing the object")
+    moved = (out[0.5]["base"] != paper["base"]).any(axis=1).mean()
+    assert abs(moved - 0.5) < 4 * math.sqrt(0.25 / n), f"share of behind starts {moved}"
 
 
 def test_sample_episodes_draws_are_independent():

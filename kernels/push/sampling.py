@@ -124,6 +124,7 @@ def sample_episodes(
     goal_difficulty: wp.array(dtype=float),
     object_mass: wp.array(dtype=wp.vec2),
     near_goal: wp.array(dtype=wp.vec3),
+    behind_start: wp.array(dtype=wp.vec2),
     task: PushTask,
     spec: EpisodeSpec,
     near_goal_start: wp.array(dtype=int),
@@ -144,6 +145,11 @@ def sample_episodes(
     area) in the disc ``radius`` around the env origin, with yaw ``yaw_object + U(-max_yaw, max_yaw)``.
     ``near_goal_start[w]`` is 1 for such an episode, 0 otherwise; ``near_goal_ended[w]`` receives the flag of the
     episode this reset ends (the statistics of ended episodes are read after their world was reset).
+
+    ``behind_start[0]`` = (share, spread [rad]) (a training-only start-state curriculum; share 0 is the paper's task):
+    with probability ``share`` the robot instead starts behind the object as seen from the goal, at a bearing
+    within ``spread`` of the one opposite the goal's, in the same radius range, facing the object within ``spread``:
+    a push toward the goal is then one walk forward.
     """
     w = wp.tid()
     if reset[w] == 0:
@@ -190,6 +196,15 @@ def sample_episodes(
         yaw_range = wp.vec2(object_yaw - near[2], object_yaw + near[2])
         spec.goal[w] = polar_pose(fork_rng(wp.randi(rng)), wp.vec2(0.0, near[1]), wp.vec2(-wp.pi, wp.pi), yaw_range)
         near_goal_start[w] = 1
+    # Drawn after the goal, which it depends on (share 0: the episodes above exactly).
+    behind = behind_start[0]
+    if wp.randf(rng) < behind[0]:
+        goal_xy = spec.goal[w]
+        opposite_goal = wp.atan2(goal_xy[1], goal_xy[0]) + wp.pi
+        base = polar_pose(fork_rng(wp.randi(rng)), params.robot_radius,
+                          wp.vec2(opposite_goal - behind[1], opposite_goal + behind[1]), wp.vec2(0.0, 0.0))
+        facing_object = wp.atan2(-base[1], -base[0])
+        spec.base[w] = wp.vec3(base[0], base[1], facing_object + uniform(wp.randf(rng), wp.vec2(-behind[1], behind[1])))
 
 
 @wp.func

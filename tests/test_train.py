@@ -169,6 +169,23 @@ def test_near_goal_start_config_is_checked():
             apply_overrides(tiny(2), [f"near_goal_starts.{field}={value}"]).validate()
 
 
+def test_behind_start_run_logs_its_share_and_eval_envs_never_start_behind(tmp_path):
+    from dynpush.sim.config import PushEnvConfig
+    from dynpush.sim.push_env import PushEnv
+
+    with pytest.raises(ConfigError, match=r"behind_starts.spread must lie in \[0, 3.14159\], got 4.0"):
+        apply_overrides(tiny(2), ["behind_starts.spread=4.0"]).validate()
+    runner = train(apply_overrides(tiny(2), ["behind_starts.share=1.0", "behind_starts.spread=0.2"]), tmp_path / "run")
+    np.testing.assert_allclose(runner.env.behind_start.numpy()[0], (1.0, 0.2), rtol=1e-6)
+    rows = [json.loads(line) for line in (tmp_path / "run" / "progress.jsonl").read_text().splitlines()]
+    assert [row["/curriculum/behind_share"] for row in rows] == [1.0, 1.0]
+    runner.env.reset()
+    base, goal = runner.env.spec.base.numpy(), runner.env.spec.goal.numpy()
+    off = np.angle(np.exp(1j * (np.arctan2(base[:, 1], base[:, 0]) - np.arctan2(goal[:, 1], goal[:, 0]) - np.pi)))
+    assert (np.abs(off) <= 0.2 + 1e-5).all()
+    np.testing.assert_array_equal(PushEnv(PushEnvConfig(num_envs=1)).behind_start.numpy()[0], (0.0, 0.0))
+
+
 def test_near_goal_run_starts_near_and_eval_envs_never_do(tmp_path):
     """A 2-iteration run with every training reset near the goal: the share is logged per iteration and the episodes
     drawn after the first rollout start are near; a fresh environment (evaluation, export: built from ``env`` alone)

@@ -210,13 +210,13 @@ def _play(args: argparse.Namespace) -> int:
 def _curve(args: argparse.Namespace) -> int:
     from .progress import SMOOTHING, plot_learning_curve
     from .run_folder import read_json
-    from .tables import paper_table_i_row
+    from .tasks import task_of_config
 
     run = Path(args.run)
     out = Path(args.out) if args.out else run / "learning_curve.png"
     config = run / "config.json"
     data = read_json(config) if config.exists() else {}
-    paper = paper_table_i_row(data)[1] if data and data.get("task") != "locomotion" else None
+    paper = task_of_config(data).paper_success(data) if data else None  # a curve without config.json: no paper line
     summary = plot_learning_curve(run, out, paper)
     rates = ", ".join(f"{key[:-len('_percent')]} {value:.1f} %" for key, value in summary.items() if key.endswith("_percent"))
     print(f"{summary['iterations']} iterations in {summary['hours']:.2f} h: {rates} (mean of the last {SMOOTHING}"

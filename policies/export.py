@@ -37,8 +37,7 @@ from dynpush.runtime.observation import NUM_ARM_JOINTS
 from dynpush.sim.scene import build_scene
 
 from .actor import load_actor
-from .locomotion_train import LocomotionTrainConfig
-from .run_folder import CONFIG, latest_checkpoint, read_json
+from .run_folder import latest_checkpoint, read_run_config
 from .train import TrainConfig
 
 if TYPE_CHECKING:
@@ -50,15 +49,6 @@ OPSET = 18  # as rsl_rl's OnPolicyRunner.export_policy_to_onnx
 def config_sha256(config: dict) -> str:
     """SHA-256 (hex) of ``config`` as canonical JSON (sorted keys, no spaces)."""
     return hashlib.sha256(json.dumps(config, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
-
-
-def load_run_config(run_dir: Path) -> TrainConfig | LocomotionTrainConfig:
-    """The training config of a run folder (its ``config.json``): a locomotion run's says ``"task": "locomotion"``."""
-    path = Path(run_dir) / CONFIG
-    if not path.exists():
-        raise MissingFileError(f"{path} not found: {run_dir} is not a dynpush run folder")
-    data = read_json(path)
-    return (LocomotionTrainConfig if data.get("task") == "locomotion" else TrainConfig).from_dict(data)
 
 
 def resolve_checkpoint(run_dir: Path, checkpoint: str | None) -> Path:
@@ -110,7 +100,9 @@ def export_policy(run_dir: Path, checkpoint: str | None = None, out: Path | None
     ``out`` defaults to ``run_dir / "policy.onnx"``.
     """
     run_dir = Path(run_dir)
-    cfg = load_run_config(run_dir)
+    # The push task's config class directly, not the task registry's load_run_config: the registry's export hooks
+    # import this module. A locomotion run's config is a ConfigError here (its "task" field is no TrainConfig field).
+    cfg = TrainConfig.from_dict(read_run_config(run_dir))
     checkpoint_path = resolve_checkpoint(run_dir, checkpoint)
     out = Path(out) if out is not None else run_dir / "policy.onnx"
     metadata = build_contract(cfg).to_metadata() | {"checkpoint": checkpoint_path.name}

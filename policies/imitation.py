@@ -37,9 +37,8 @@ from dynpush.errors import MissingFileError
 from dynpush.sim.config import ConfigError
 
 from .checkpoint_file import read_checkpoint
-from .export import load_run_config
 from .scripted import ScriptedPusher, ScriptedPusherConfig, check_object_size
-from .run_folder import IMITATION_CHECKPOINT, read_json, record_launch
+from .run_folder import IMITATION_CHECKPOINT, read_json, read_run_config, record_launch
 from .fine_tune import scripted_expert
 from .train import TrainConfig
 from .training import sigterm_as_keyboard_interrupt
@@ -158,7 +157,7 @@ def imitate(cfg: TrainConfig, imitation: ImitationConfig, run_dir: Path, resume:
     if resume:
         if not data_path.exists():
             raise MissingFileError(f"--resume: no {data_path}; start without --resume first")
-        cfg = load_run_config(run_dir)
+        cfg = TrainConfig.from_dict(read_run_config(run_dir))  # DAgger trains the push task only
         # The data set was labelled by the run's expert: keep it (configs older than the field had the true sizes).
         saved_imitation = read_json(run_dir / "imitation_config.json")
         imitation = replace(imitation, expert_object_size=saved_imitation.get("expert_object_size"),

@@ -23,8 +23,9 @@ from dynpush.runtime.config import LocomotionTerm, OnnxLocomotionConfig
 from dynpush.runtime.locomotion_contract import LocomotionContract
 
 from .actor import load_actor
-from .export import config_sha256, load_run_config, resolve_checkpoint, write_onnx
+from .export import config_sha256, resolve_checkpoint, write_onnx
 from .locomotion_train import LocomotionTrainConfig
+from .run_folder import read_run_config
 
 if TYPE_CHECKING:
     from dynpush.sim.legged_scene import LeggedRobotDescription
@@ -46,9 +47,9 @@ def export_locomotion(run_dir: Path, checkpoint: str | None = None, out: Path | 
     from dynpush.sim.legged_scene import legged_robot_builder
 
     run_dir = Path(run_dir)
-    cfg = load_run_config(run_dir)
-    if not isinstance(cfg, LocomotionTrainConfig):
-        raise ValueError(f"{run_dir} is not a locomotion run (its config.json lacks \"task\": \"locomotion\")")
+    # The locomotion config class directly, not the task registry's load_run_config: the registry's export hooks
+    # import this module. A push run's config is a ConfigError here (its fields are no LocomotionTrainConfig's).
+    cfg = LocomotionTrainConfig.from_dict(read_run_config(run_dir))
     checkpoint_path = resolve_checkpoint(run_dir, checkpoint)
     out = Path(out) if out is not None else run_dir / "locomotion.onnx"
     robot = legged_robot_builder()[1]

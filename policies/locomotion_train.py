@@ -30,7 +30,7 @@ def _no_terminations() -> dict[str, tuple[float, float]]:
 
 @dataclass
 class LocomotionTrainConfig:
-    task: str = "locomotion"  # tells a run's config.json from a push run's (policies/export.py: load_run_config)
+    task: str = "locomotion"  # tells a run's config.json from a push run's (policies/tasks.py: task_of_config)
     preset: str = "cpu"
     env: LocomotionEnvConfig = field(default_factory=LocomotionEnvConfig)
     iterations: int = 1500  # ~37 M world-steps at 1024 worlds x 24 steps (flat-ground tracking converges in ~30 M)

@@ -112,6 +112,14 @@ def read_json(path: Path) -> dict:
     return data
 
 
+def read_run_config(run_dir: Path) -> dict:
+    """The JSON object of a run folder's ``config.json``; a MissingFileError saying the folder is no run without it."""
+    path = Path(run_dir) / CONFIG
+    if not path.exists():
+        raise MissingFileError(f"{path} not found: {run_dir} is not a dynpush run folder")
+    return read_json(path)
+
+
 def write_config(run_dir: Path, config: dict) -> None:
     """Writes the run's ``config.json`` (creating the folder)."""
     run_dir.mkdir(parents=True, exist_ok=True)

@@ -18,10 +18,10 @@ from pathlib import Path
 from dynpush.errors import MissingFileError
 
 from .checkpoint_file import read_checkpoint
-from .export import load_run_config, resolve_checkpoint
+from .export import resolve_checkpoint
 from .onnx_policy import OnnxPolicy
 from .progress import imitation_summary, plot_learning_curve, training_records, wall_clock_hours
-from .tasks import task_of_run
+from .tasks import load_run_config, task_of_run
 
 
 def read_launches(run_dir: Path) -> list[dict]:

@@ -3,8 +3,9 @@ evaluation commands need to know of a task, in one place (:data:`TASKS`).
 
 Importing this module is cheap (standard library and ``dynpush.shipped`` only), so that ``import dynpush.cli`` stays
 fast: each hook imports the task's heavy modules (torch, the simulator) when it is called. A run folder's task is
-the class of its training config (:func:`~dynpush.policies.export.load_run_config` reads ``config.json``, where a
-locomotion run says ``"task": "locomotion"``); an exported ONNX's task is told by its metadata.
+named by its ``config.json`` (:func:`task_of_config`: a locomotion run's says ``"task": "locomotion"``, a push run's
+names none), which :func:`load_run_config` reads as that task's training config; an exported ONNX's task is told by
+its metadata.
 """
 
 from __future__ import annotations
@@ -12,8 +13,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from dynpush.shipped import LOCOMOTION_DIR, SHIPPED_DIR
+
+if TYPE_CHECKING:
+    from .training import TaskTrainConfig
 
 
 @dataclass(frozen=True)
@@ -32,6 +37,8 @@ class TaskSpec:
     is_policy: Callable[[dict[str, str]], bool]  # whether an ONNX file's metadata_props are of a policy of this task
     refusal: Callable[[Path, str], str]  # (policy, command) -> the line a command of this task stops with on another
     #                                      task's ONNX
+    paper_success: Callable[[dict], float | None]  # a run's config.json -> the paper's success rate [%] that
+    #                                                ``dynpush curve`` marks (None: the paper has no such figure)
 
 
 def _push_config() -> type:
@@ -92,6 +99,13 @@ def _ship_locomotion(run_dir: Path, checkpoint_path: Path, out_dir: Path, episod
                                                         "tracking_rms", "units", "violated_percent_of_steps")}}
 
 
+def _paper_success_push(training_config: dict) -> float:
+    """The success rate [%] of the paper's Table I row of the ablation ``training_config`` describes."""
+    from .tables import paper_table_i_row
+
+    return paper_table_i_row(training_config)[1]
+
+
 def _is_locomotion_policy(metadata: dict[str, str]) -> bool:
     from dynpush.runtime.locomotion_contract import LOCOMOTION_CONTRACT_KEY
 
@@ -119,6 +133,7 @@ PUSH = TaskSpec(
     is_policy=lambda metadata: not _is_locomotion_policy(metadata),
     refusal=lambda policy, command: (f"{policy} is a locomotion policy: evaluate it with dynpush eval-locomotion"
                                      f" (dynpush {command} takes a push policy)"),
+    paper_success=_paper_success_push,
 )
 LOCOMOTION = TaskSpec(
     name="locomotion",
@@ -133,16 +148,35 @@ LOCOMOTION = TaskSpec(
                                         + f", fell {evaluation['fell_percent']:.1f} % of {evaluation['worlds']} worlds"),
     is_policy=_is_locomotion_policy,
     refusal=_not_locomotion,
+    paper_success=lambda training_config: None,  # the paper trains its locomotion policy but reports no rate of it
 )
 TASKS: dict[str, TaskSpec] = {task.name: task for task in (PUSH, LOCOMOTION)}
 
 
-def task_of_run(run_dir: Path) -> TaskSpec:
-    """The task of a run folder: the one whose training config class its ``config.json`` reads as."""
-    from .export import load_run_config
+def task_of_config(training_config: dict) -> TaskSpec:
+    """The task of a run's ``config.json``: the one its ``"task"`` field names; the push task's config has no such
+    field (it came before the locomotion task), so a config without one is of the push task."""
+    from dynpush.sim.config import ConfigError
 
-    cfg = load_run_config(Path(run_dir))
-    return next(task for task in TASKS.values() if isinstance(cfg, task.config_class()))
+    name = training_config.get("task", PUSH.name)
+    if name not in TASKS:
+        raise ConfigError(f"task must be one of {sorted(TASKS)}, got {name!r}")
+    return TASKS[name]
+
+
+def task_of_run(run_dir: Path) -> TaskSpec:
+    """The task of a run folder, named by its ``config.json`` (a missing or unreadable file: UserError)."""
+    from .run_folder import read_run_config
+
+    return task_of_config(read_run_config(run_dir))
+
+
+def load_run_config(run_dir: Path) -> TaskTrainConfig:
+    """The training config of a run folder (its ``config.json``), of its task's config class."""
+    from .run_folder import read_run_config
+
+    data = read_run_config(run_dir)
+    return task_of_config(data).config_class().from_dict(data)
 
 
 def task_of_onnx(path: Path) -> TaskSpec:

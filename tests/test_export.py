@@ -12,8 +12,9 @@ from tensordict import TensorDict
 from dynpush.assets_usd import ARM_JOINT_NAMES
 from dynpush.cli import main
 from dynpush.policies.actor import load_actor
-from dynpush.policies.export import build_contract, config_sha256, export_policy, load_run_config
+from dynpush.policies.export import build_contract, config_sha256, export_policy
 from dynpush.policies.onnx_policy import OnnxPolicy
+from dynpush.policies.tasks import load_run_config
 from dynpush.policies.train import TrainConfig, apply_overrides, train
 from dynpush.runtime.contract import ContractError, PolicyContract
 from dynpush.sim.onnx_session import read_metadata

@@ -17,9 +17,9 @@ from dynpush.kernels.locomotion import (
     views as loco_views,
 )
 from dynpush.policies.actor import load_actor
-from dynpush.policies.export import load_run_config
 from dynpush.policies.locomotion_export import export_locomotion
 from dynpush.policies.locomotion_train import LocomotionTrainConfig
+from dynpush.policies.tasks import load_run_config
 from dynpush.runtime.errors import StartupError
 from dynpush.runtime.locomotion import OnnxLocomotion
 from dynpush.runtime.locomotion_contract import LocomotionContract

@@ -8,8 +8,9 @@ touches the object succeeds often, so the policy learns to stay away.
 Object mass: the objects' masses are drawn from ``[m_low, m_high(d)]`` with ``m_high`` rising from ``initial_max`` to
 the configured ``randomization.mass`` maximum (``PushEnv.set_object_mass_range``). Our arm's PD joints yield
 under a heavy object: pushing one takes the legs, the base or a folded arm, and each such push is a collision that
-CaT terminates; with the paper's collision ``p_max`` of 1.0 a policy learning from scratch on 1-10 kg objects learns
-to keep away, while on 1-2 kg objects it learns to push (docs/ppo_fine_tuning.md).
+CaT terminates; on the sanity task (``benchmarks/ppo_sanity.py``) with the paper's collision ``p_max`` of 1.0 a policy
+learning from scratch on 1-10 kg objects learns to keep away, while on 1-2 kg objects it learns to push
+(docs/ppo_fine_tuning.md).
 
 Both levels follow the training success rate (:class:`SuccessGatedLevel`): after every iteration a level rises by
 ``step`` when the success rate of the episodes that ended during it (over all processes) exceeds ``promote_above``,
@@ -22,9 +23,9 @@ where the shipped policy fails most (it ends 39 % of its episodes at the goal wi
 else is drawn as in the paper. An environment starts with share 0, so evaluation and export never use it.
 
 Starts behind the object: a share of the training resets puts the robot behind the object as seen from the goal,
-facing it (``PushEnv.set_behind_starts``), where a push toward the goal is one walk forward: from that start a
-policy learns to push from scratch within a few hundred iterations (``benchmarks/ppo_sanity.py``), while from the
-paper's starts, anywhere around the object and facing anywhere, it must first learn to walk round it.
+facing it (``PushEnv.set_behind_starts``), where a push toward the goal is one walk forward, as in the sanity task
+(a goal 0.5 m ahead, learnt from scratch within a few hundred iterations); from the paper's starts, anywhere around
+the object and facing anywhere, a policy must first learn to walk round it.
 """
 
 from __future__ import annotations

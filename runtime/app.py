@@ -107,7 +107,7 @@ class Runtime:
     def summary(self) -> dict:
         safety = self.controller.safety
         return {
-            "timing": self.stats.summary(self.ticker.skipped),
+            "timing": self.stats.summary(self.ticker.skipped) | {"overrun": self.controller.overruns.summary()},
             "states": dict(self.state_ticks),
             "final_state": safety.state.name,
             "final_reason": safety.reason,

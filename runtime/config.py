@@ -43,6 +43,7 @@ CLOCKS = ("realtime", "lockstep")
 MAX_TIMEOUT_S = 1.0  # staleness limits: older measurements must stop the robot within a second
 MAX_RAMP_S = 60.0
 MAX_ADVANCE_AFTER_S = 3600.0
+MAX_OVERRUN_WINDOW = 500  # control periods (10 s at 50 Hz): the overrun check is about the last seconds, not the run
 LOOPBACK = "127.0.0.1"
 
 
@@ -247,16 +248,40 @@ class LocomotionConfig:
 
 
 @dataclass
+class OverrunConfig:
+    """How many control deadlines the runtime may skip (its own ticks overran) before it stops the robot.
+
+    More than ``max_skipped`` skipped among the last ``window_periods`` deadlines latches STOPPED
+    (``timing.OverrunGuard``). The default, 5 of 50 (1 s at 50 Hz), asks the runtime to keep 90 % of the control
+    rate in every second, the bound sim2sim asks of the simulator (``min_rate``): one stall that skips 5 deadlines
+    (about 0.1 s without a new command) passes; a computer that keeps losing ticks, and so drives the robot at a
+    rate its policy was not trained for, is stopped.
+    """
+
+    max_skipped: int = 5  # skipped deadlines allowed within the window; one more is a fault
+    window_periods: int = 50  # [control periods]
+
+    def validate(self, prefix: str) -> None:
+        window = self.window_periods
+        _require(1 <= window <= MAX_OVERRUN_WINDOW,
+                 f"{prefix}.window_periods must be an integer in [1, {MAX_OVERRUN_WINDOW}], got {window!r}")
+        _require(0 <= self.max_skipped < window, f"{prefix}.max_skipped must be an integer in [0, {window - 1}]"
+                 f" (fewer than {prefix}.window_periods), got {self.max_skipped!r}")
+
+
+@dataclass
 class RatesConfig:
     control_hz: float = 50.0  # must equal the push policy's control rate (paper III: 50 Hz)
     clock: str = "realtime"  # realtime: perf_counter deadlines; lockstep: one tick per robot state (simulators)
     log_flush_s: float = 1.0  # the tick log reaches the OS at least this often
+    overrun: OverrunConfig = field(default_factory=OverrunConfig)  # skipped deadlines that stop the robot
 
     def validate(self, prefix: str = "rates") -> None:
         _check_positive(f"{prefix}.control_hz", self.control_hz)
         _check_choice(f"{prefix}.clock", self.clock, CLOCKS)
         _check_positive(f"{prefix}.log_flush_s", self.log_flush_s)
         _require(self.log_flush_s <= 1.0, f"{prefix}.log_flush_s must be <= 1 s, got {self.log_flush_s}")
+        self.overrun.validate(f"{prefix}.overrun")
 
 
 @dataclass

@@ -11,11 +11,14 @@ goal height equal to the object's measured height (planar task). Actions become 
 training, by the contract's action mapping (actions.py): ``u_base = default + scale * a[0:6]``,
 ``q_arm = default + arm_scale * a[6:11]``, with ``a`` clipped to ``+-action_clip``. Every command is
 clamped to its limits and checked before it leaves: one with a non-finite value (or beyond a limit)
-latches STOPPED and is replaced by a stop command.
+latches STOPPED and is replaced by a stop command. So do the runtime's own overruns: more deadlines skipped
+within a window than ``rates.overrun`` allows (:class:`~.timing.OverrunGuard`, fed every tick's timing) latches
+STOPPED with the figures as its reason, also logged as one error line.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
@@ -33,8 +36,9 @@ from .policy import OnnxModel
 from .robot_link import ReceivedState
 from .safety import CommandLimits, SafetyInputs, SafetyMachine, State
 from .tick_log import RecordLayout
-from .timing import TickTiming
+from .timing import OverrunGuard, TickTiming
 
+_LOG = logging.getLogger(__name__)
 ACTIVE_STATES = (State.RAMP, State.PUSH, State.HOLD, State.MOCAP_LOST)  # the robot tracks targets
 
 
@@ -62,6 +66,7 @@ class Controller:
         self.locomotion = locomotion
         self.limits = CommandLimits.resolve(cfg, contract)
         self.safety = SafetyMachine(cfg.robot.timeout_s, cfg.mocap.timeout_s, math.radians(cfg.safety.max_tilt_deg))
+        self.overruns = OverrunGuard(cfg.rates.overrun.max_skipped, cfg.rates.overrun.window_periods)
         self._mocap_timeout_s = cfg.mocap.timeout_s
         self._ramp_s = cfg.safety.arm_ramp_s
         self._mapping = contract.action_mapping()
@@ -113,6 +118,10 @@ class Controller:
         finite, tilt, actions = self._measure(base, obj, robot, goal if fresh else None)
 
         previous = self.safety.state
+        overrun = self.overruns.add(timing)
+        if overrun is not None and previous != State.STOPPED:
+            _LOG.error("%s; stopping", overrun)
+            self.safety.trip(overrun)
         state = self.safety.update(SafetyInputs(
             now=now, robot_age=robot_age, mocap_age=self.mocap_age, tilt=tilt, finite=finite, ramp_done=self._ramp_done,
             has_goal=goal is not None, at_goal=fresh and goal is not None and self._at_goal(obj, goal),

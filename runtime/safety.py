@@ -12,8 +12,9 @@ States (:class:`State`) and what the robot is told in each:
   Fresh poses resume the previous activity.
 - ``STOPPED`` (latched until restart): robot state older than ``robot.timeout_s``, base tilt (IMU)
   beyond ``safety.max_tilt_deg``, a non-finite number anywhere in the tick, or an outgoing command
-  that is not finite or lies beyond its limits after clamping (:meth:`CommandLimits.clamp`):
-  command mode stop (damping on hardware).
+  that is not finite or lies beyond its limits after clamping (:meth:`CommandLimits.clamp`), or the
+  runtime's own overruns: more deadlines skipped than ``rates.overrun`` allows (``timing.OverrunGuard``,
+  tripped by the controller): command mode stop (damping on hardware).
 
 Transitions: STARTUP -> RAMP on the first robot state; RAMP -> PUSH/HOLD/MOCAP_LOST when the ramp
 ends; PUSH <-> HOLD <-> MOCAP_LOST as above; any -> STOPPED. Joint targets and the base command are

@@ -4,6 +4,11 @@ Tick ``k`` is due at ``t0 + k * period`` (``t0``: the first tick). A tick that o
 deadlines does not cause a burst of catch-up ticks: the ticker runs the newest missed deadline at
 once (late by less than one period) and counts the older ones as skipped. Times are seconds of the
 clock in use: ``time.perf_counter`` in real time, simulated time in lock-step.
+
+:class:`OverrunGuard` judges the rate the runtime itself keeps from the skipped deadlines: too many within a
+window of control periods is a fault, and the controller stops the robot. In lock-step a deadline is reached when
+the robot's next state arrives, however long a tick computed, so no deadline is ever skipped and the guard cannot
+trip there.
 """
 
 from __future__ import annotations
@@ -11,6 +16,7 @@ from __future__ import annotations
 import threading
 import time
 from array import array
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
@@ -101,6 +107,43 @@ class Ticker:
         start = clock.now()
         self._index = index
         return TickTiming(index=index, deadline=deadline, start=start, lateness=start - deadline, skipped=self.skipped)
+
+
+class OverrunGuard:
+    """More than ``max_skipped`` deadlines skipped among the last ``window`` deadlines is a fault.
+
+    The window holds the current tick's deadline and the ``window - 1`` before it (``window`` control periods, 1 s
+    at 50 Hz with the default 50), so skips age out as the loop runs on time. A tick computing past the next
+    deadline makes the following tick late; past the one after, deadlines are skipped, and a computer that stays
+    too slow keeps skipping them.
+    """
+
+    def __init__(self, max_skipped: int, window: int):
+        self.max_skipped = max_skipped
+        self.window = window  # [control periods]
+        self._skipped: deque[int] = deque()  # indices of the skipped deadlines within the window
+        self._total = 0  # TickTiming.skipped of the previous tick
+        self.worst = 0  # the most deadlines skipped within one window so far
+
+    def add(self, timing: TickTiming) -> str | None:
+        """Takes one tick; the fault in one line with its figures while the window holds more than
+        ``max_skipped`` skipped deadlines, else None."""
+        new = timing.skipped - self._total
+        self._total = timing.skipped
+        oldest = timing.index - self.window + 1  # the first deadline within the window
+        self._skipped.extend(range(max(timing.index - new, oldest), timing.index))
+        while self._skipped and self._skipped[0] < oldest:
+            self._skipped.popleft()
+        count = len(self._skipped)
+        self.worst = max(self.worst, count)
+        if count <= self.max_skipped:
+            return None
+        return (f"control rate: {count} deadlines skipped in the last {self.window} control periods"
+                f" (limit {self.max_skipped})")
+
+    def summary(self) -> dict:
+        """The limit and the most deadlines skipped within one window so far."""
+        return {"max_skipped": self.max_skipped, "window_periods": self.window, "worst_window_skipped": self.worst}
 
 
 class TimingStats:

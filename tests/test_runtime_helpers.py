@@ -1,4 +1,5 @@
-"""Helpers shared by the runtime tests (this file holds no tests): tiny ONNX networks, contracts, a fake robot.
+"""Helpers shared by the runtime tests (this file holds no tests): tiny ONNX networks, contracts, a fake clock and
+a fake robot.
 
 Networks are one Gemm layer (``y = x W + b``) with small random weights built with ``onnx.helper``;
 contracts carry the dynpush robot's numbers (arm joints, defaults, limits) written out by hand, so
@@ -74,6 +75,23 @@ def robot_state(seq: int = 0, arm_q=ARM_DEFAULT, legs: int = 0, quat=(0.0, 0.0, 
     return Proprioception(seq=seq, stamp_s=0.0, base_quat_xyzw=np.array(quat, float), base_linear_velocity_b=np.zeros(3),
                           base_angular_velocity_b=np.zeros(3), ee_position_b=np.array([0.6, 0.0, 0.3]),
                           arm_q=np.array(arm_q, float), arm_qd=np.zeros(5), leg_q=np.zeros(legs), leg_qd=np.zeros(legs))
+
+
+class FakeClock:
+    """A clock for :class:`~dynpush.runtime.timing.Ticker` whose time advances only when the loop sleeps or
+    'computes' (``work``) [s]."""
+
+    def __init__(self, start: float = 100.0):
+        self.t = start
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep_until(self, deadline: float) -> None:
+        self.t = max(self.t, deadline)
+
+    def work(self, seconds: float) -> None:
+        self.t += seconds
 
 
 class FakeRobot(threading.Thread):

@@ -1,6 +1,6 @@
 """Safety state machine transitions (stale mocap, stale robot state, NaN, attitude, success, new goal), the
-controller's outputs in each state (ramp, hold, clamping, stop), the check of every outgoing command, a locomotion
-ONNX, and frame conversion."""
+controller's outputs in each state (ramp, hold, clamping, stop), its stop on the runtime's own overruns, the check of
+every outgoing command, a locomotion ONNX, and frame conversion."""
 
 import math
 
@@ -101,13 +101,17 @@ class Ticks:
 
     def __init__(self, ctrl: Controller, legs: int = 0):
         self.ctrl, self.k, self.legs = ctrl, 0, legs
+        self.skipped = 0
         self.state = robot_state(legs=legs)
         self.object = np.array([0.0, 0.0, 0.35])
         self.goal = Goal(1.0, 0.0, 0.0)
 
-    def __call__(self, mocap_age=0.0, robot_age=0.0, goal_changed=False):
+    def __call__(self, mocap_age=0.0, robot_age=0.0, goal_changed=False, skip=0):
+        """One tick; ``skip``: deadlines skipped before it (the previous tick overran)."""
+        self.k += skip
+        self.skipped += skip
         t = 0.02 * self.k
-        timing = TickTiming(index=self.k, deadline=t, start=t, lateness=0.0, skipped=0)
+        timing = TickTiming(index=self.k, deadline=t, start=t, lateness=0.0, skipped=self.skipped)
         self.k += 1
         base = TrackedPose(Pose(np.array([-1.0, 0.0, 0.5]), np.array([0, 0, 0, 1.0])), t - mocap_age)
         obj = TrackedPose(Pose(self.object.copy(), np.array([0, 0, 0, 1.0])), t - mocap_age)
@@ -179,6 +183,21 @@ def test_faults_stop_the_robot(tmp_path, fault):
         command = [ticks() for _ in range(3)][-1]
     assert command.state == State.STOPPED and command.mode == MODE_STOP
     assert np.isfinite(command.base_command).all() and np.isfinite(command.arm_targets).all()
+
+
+def test_overruns_beyond_the_limit_stop_the_robot(tmp_path, caplog):
+    """``rates.overrun``: 2 skipped deadlines within 10 periods are allowed, the 3rd latches STOPPED."""
+    ticks = Ticks(controller(tmp_path, bias=np.full(11, 0.5), safety={"arm_ramp_s": 0.02},
+                             rates={"overrun": {"max_skipped": 2, "window_periods": 10}}))
+    assert [ticks() for _ in range(4)][-1].state == State.PUSH and ticks(skip=2).state == State.PUSH
+    last = ticks()
+    assert last.state == State.PUSH, "2 skipped deadlines are within the limit"
+    stopped = ticks(skip=1)
+    assert stopped.state == State.STOPPED and stopped.mode == MODE_STOP
+    np.testing.assert_array_equal(stopped.arm_targets, last.arm_targets, err_msg="the last targets that passed")
+    assert [ticks() for _ in range(12)][-1].state == State.STOPPED, "latched after the skips left the window"
+    reason = "control rate: 3 deadlines skipped in the last 10 control periods (limit 2)"
+    assert ticks.ctrl.safety.reason == reason and [r.getMessage() for r in caplog.records] == [f"{reason}; stopping"]
 
 
 def test_locomotion_onnx_sends_12_leg_and_5_arm_targets(tmp_path):

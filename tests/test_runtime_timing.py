@@ -8,24 +8,9 @@ import numpy as np
 import pytest
 
 from dynpush.runtime.timing import LockstepClock, Ticker, TimingStats
+from test_runtime_helpers import FakeClock
 
 PERIOD = 0.02
-
-
-class FakeClock:
-    """Time advances only when the loop sleeps or 'computes' (``work``)."""
-
-    def __init__(self, start: float = 100.0):
-        self.t = start
-
-    def now(self) -> float:
-        return self.t
-
-    def sleep_until(self, deadline: float) -> None:
-        self.t = max(self.t, deadline)
-
-    def work(self, seconds: float) -> None:
-        self.t += seconds
 
 
 def run(compute_times: list[float]):

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from dynpush.kernels.locomotion.constraints import CONSTRAINT_GROUPS
 from dynpush.sim.config import ConfigError
@@ -98,6 +99,11 @@ class LocomotionTrainConfig:
                 randomization = {**randomization, "ee_force_max": 0.0}
             data["env"] = {**data["env"], "randomization": randomization}
         return config_from_dict(LocomotionTrainConfig, data)
+
+    def check_onnx_start(self, init_from: Path) -> None:
+        """A locomotion run starts from a checkpoint only (it has no critic warm-up): always raises a ConfigError."""
+        raise ConfigError(f"--init-from {init_from}: an ONNX file can start a push run only; a locomotion run starts"
+                          " from a checkpoint (model_K.pt)")
 
     def make_env(self, env: LocomotionEnvConfig):
         from dynpush.sim.locomotion_env import LocomotionEnv

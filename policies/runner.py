@@ -152,9 +152,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self.alg.on_rollout_start = on_rollout_start
         if self.near_goal_starts.share > 0:
             self.apply_near_goal_starts()
-        if self.behind_starts.share > 0:  # at every launch: a resumed run's environment starts with none
-            self.env.set_behind_starts(self.behind_starts.share, self.behind_starts.spread)
-            self.logger.run_state["/curriculum/behind_share"] = self.behind_starts.share
+        if self.behind_starts.share > 0:
+            self.apply_behind_starts()
         try:
             super().learn(num_learning_iterations, init_at_random_ep_len)
         except TimeBudgetSpent:
@@ -237,6 +236,13 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         cfg = self.near_goal_starts
         self.env.set_near_goal_starts(cfg.share, cfg.goal_radius, cfg.max_yaw)
         self.logger.run_state["/curriculum/near_goal_share"] = cfg.share
+
+    def apply_behind_starts(self) -> None:
+        """Sets the training environment's starts behind the object (at every launch: a resumed run's environment
+        starts with none) and logs their share (the logger keeps it for every iteration)."""
+        cfg = self.behind_starts
+        self.env.set_behind_starts(cfg.share, cfg.spread)
+        self.logger.run_state["/curriculum/behind_share"] = cfg.share
 
     def training_state(self, next_iteration: int) -> dict:
         """What a checkpoint holds: the algorithm's state, the iteration a resumed run starts at, the environment's

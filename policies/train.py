@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
 from dynpush.sim.config import ConfigError, PushEnvConfig
@@ -121,6 +122,14 @@ class TrainConfig:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+    def check_onnx_start(self, init_from: Path) -> None:
+        """A run may start from an exported actor when its new critic learns the returns first: raises a ConfigError
+        unless ``fine_tune.critic_warmup_iterations`` > 0."""
+        if not self.fine_tune.critic_warmup_iterations:
+            raise ConfigError(f"--init-from {init_from}: an ONNX file holds the actor only; set"
+                              " fine_tune.critic_warmup_iterations > 0 (e.g. 60) so that the new critic learns the"
+                              " returns before the actor is trained")
 
     def make_env(self, env: PushEnvConfig):
         """The push environment of ``env`` (tracked base, or the legged robot with ``env.legged.enabled``)."""

@@ -57,6 +57,10 @@ class TaskTrainConfig(Protocol):
 
     def runner_cfg(self) -> dict: ...
 
+    def check_onnx_start(self, init_from: Path) -> None:
+        """Raises a ConfigError when a new run of this config cannot start from the exported actor ``init_from``
+        (``--init-from policy.onnx``), which holds no critic."""
+
 
 @dataclass
 class PPOConfig:
@@ -332,13 +336,7 @@ def read_onnx_actor(cfg: TaskTrainConfig, init_from: Path | None) -> torch.nn.Mo
     None when ``init_from`` is not an ONNX file."""
     if init_from is None or init_from.suffix != ".onnx":
         return None
-    if not hasattr(cfg, "fine_tune"):  # the push task's config; the critic must learn first
-        raise ConfigError(f"--init-from {init_from}: an ONNX file can start a push run only; a locomotion run starts"
-                          " from a checkpoint (model_K.pt)")
-    if not cfg.fine_tune.critic_warmup_iterations:
-        raise ConfigError(f"--init-from {init_from}: an ONNX file holds the actor only; set"
-                          " fine_tune.critic_warmup_iterations > 0 (e.g. 60) so that the new critic learns the returns"
-                          " before the actor is trained")
+    cfg.check_onnx_start(init_from)
     actor = build_actor(cfg)
     load_onnx_actor(actor, init_from)
     return actor

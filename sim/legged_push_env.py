@@ -24,6 +24,7 @@ import numpy as np
 import torch
 import warp as wp
 
+from dynpush.assets_usd import LEG_JOINT_NAMES
 from dynpush.kernels.locomotion import (
     actions as loco_actions,
     constraints as loco_constraints,
@@ -176,13 +177,23 @@ class LeggedPushEnv(PushEnv):
 
     def set_leg_targets(self, targets: np.ndarray) -> None:
         """Leg joint targets [rad] (num_envs, 12, ``LEG_JOINT_NAMES`` order) for the next steps, when no locomotion
-        policy runs inside the environment (they are applied as the actions of the locomotion contract)."""
+        policy runs inside the environment (they are applied as the actions of the locomotion contract). A target
+        beyond what those actions reach, the joint's default +- action scale x ``actions.clip``, is a ValueError
+        naming the joint, rather than clipped."""
         if self.locomotion is not None:
             raise RuntimeError("set_leg_targets: this environment runs its own locomotion policy")
         targets = np.asarray(targets, dtype=np.float32)
         if targets.shape != (self.num_envs, loco_views.NUM_LEG_JOINTS) or not np.all(np.isfinite(targets)):
             raise ValueError(f"leg targets must be finite with shape ({self.num_envs}, 12), got {targets.shape}")
-        self.leg_actions.assign(self.leg_scaling.actions(targets))
+        actions = self.leg_scaling.actions(targets)
+        outside = np.argwhere(np.abs(actions) > self.cfg.actions.clip)
+        if len(outside):
+            world, joint = outside[0]
+            reach = float(self.leg_scaling.scale) * self.cfg.actions.clip
+            default = self.leg_scaling.default[joint]
+            raise ValueError(f"leg target of {LEG_JOINT_NAMES[joint]} (world {world}) must lie in"
+                             f" [{default - reach:.3f}, {default + reach:.3f}] rad, got {targets[world, joint]:.3f}")
+        self.leg_actions.assign(actions)
 
     def _launch_step(self, front: wp.Graph | None = None) -> None:
         """The actions graph (or ``front``), the locomotion network on the leg observations (if it runs here), the

@@ -20,6 +20,7 @@ from dynpush.policies.actor import load_actor
 from dynpush.policies.locomotion_export import export_locomotion
 from dynpush.policies.locomotion_train import LocomotionTrainConfig
 from dynpush.policies.tasks import load_run_config
+from dynpush.policies.training import apply_overrides
 from dynpush.runtime.errors import StartupError
 from dynpush.runtime.locomotion import OnnxLocomotion
 from dynpush.runtime.locomotion_contract import LocomotionContract
@@ -345,6 +346,33 @@ def test_end_effector_force_config_errors_name_the_field(field, value, message):
     setattr(cfg.randomization, field, value)
     with pytest.raises(ConfigError, match=message):
         cfg.validate()
+
+
+@pytest.mark.parametrize("override, message", [
+    ("task='push'", r"^task must be 'locomotion', got 'push'$"),
+    ("env.num_envs=0", r"^num_envs must be an integer >= 1, got 0$"),
+    ("save_interval=0", r"^save_interval must be an integer >= 1, got 0$"),
+    ("p_max_ramp_fraction=1.5", r"^p_max_ramp_fraction must lie in \[0, 1\], got 1.5$"),
+    ("p_max={'collision': (0.0, 0.0)}", r"^p_max must name exactly the constraint groups"),
+])
+def test_locomotion_train_config_errors_name_the_field(override, message):
+    with pytest.raises(ConfigError, match=message):
+        apply_overrides(LocomotionTrainConfig.preset_config("cpu"), [override]).validate()
+
+
+def test_leg_targets_beyond_the_leg_actions_reach_are_refused():
+    """External leg targets (sim-to-sim) are applied as leg actions clipped at ``actions.clip``: a target beyond
+    default +- 0.5 x 10 rad is refused with the joint's name instead of clipped; the joint limits lie within."""
+    env = make_push_env(PushEnvConfig(num_envs=2, legged=LeggedModeConfig(enabled=True)))
+    legs = env.scene.robot.legged
+    low, high = legs.leg_default - 5.0, legs.leg_default + 5.0
+    assert (low <= legs.leg_lower).all() and (legs.leg_upper <= high).all()
+    targets = np.tile(legs.leg_upper, (2, 1))
+    env.set_leg_targets(targets)
+    targets[1, 4] = high[4] + 0.1
+    with pytest.raises(ValueError, match=rf"^leg target of {LEG_JOINT_NAMES[4]} \(world 1\) must lie in"
+                                         rf" \[{low[4]:.3f}, {high[4]:.3f}\] rad, got {targets[1, 4]:.3f}$"):
+        env.set_leg_targets(targets)
 
 
 def test_objects_left_alone_stand_still_beside_stamping_legged_robots():

@@ -32,6 +32,17 @@ def test_overrides_are_typed_and_checked():
         TrainConfig.preset_config("laptop")
 
 
+def test_only_a_push_run_with_a_critic_warmup_starts_from_an_onnx_actor(tmp_path):
+    from dynpush.policies.locomotion_train import LocomotionTrainConfig
+    from dynpush.policies.training import read_onnx_actor
+
+    onnx = tmp_path / "policy.onnx"  # refused before the file is read
+    with pytest.raises(ConfigError, match="an ONNX file can start a push run only"):
+        read_onnx_actor(LocomotionTrainConfig(), onnx)
+    with pytest.raises(ConfigError, match=r"set fine_tune.critic_warmup_iterations > 0"):
+        read_onnx_actor(TrainConfig(), onnx)
+
+
 def test_tuple_overrides_keep_their_element_type():
     cfg = apply_overrides(TrainConfig.preset_config("cpu"), ["env.constraints.leg_nominal_torque=(80, 80, 80.5)"])
     assert cfg.env.constraints.leg_nominal_torque == (80.0, 80.0, 80.5)
@@ -279,6 +290,17 @@ def test_mass_curriculum_maps_its_level_onto_the_configured_masses():
     assert cfg.next_difficulty(0.5, 0.25) == pytest.approx(0.525)  # promoted above 0.2
     with pytest.raises(ConfigError, match=r"mass_curriculum.initial_max must lie in env.randomization.mass \(1.0, 10.0\)"):
         apply_overrides(tiny(1), ["mass_curriculum.initial_max=0.5"]).validate()
+
+
+@pytest.mark.parametrize("override, message", [
+    ("curriculum.initial=-0.1", r"^curriculum.initial must lie in \[0, 1\], got -0.1$"),
+    ("curriculum.demote_below=0.5", r"^curriculum.demote_below must be <= curriculum.promote_above$"),
+    ("mass_curriculum.promote_above=1.5", r"^mass_curriculum.promote_above must lie in \[0, 1\], got 1.5$"),
+    ("mass_curriculum.initial_max=12.0", r"^mass_curriculum.initial_max must lie in env.randomization.mass"),
+])
+def test_curriculum_config_errors_name_the_field(override, message):
+    with pytest.raises(ConfigError, match=message):
+        apply_overrides(tiny(1), [override]).validate()
 
 
 def test_mass_curriculum_run_starts_light_resumes_its_level_and_eval_envs_keep_the_masses(tmp_path):

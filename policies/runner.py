@@ -97,6 +97,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self.mass_difficulty = self.mass_curriculum.initial  # saved in checkpoints: the environment keeps no level
         self.near_goal_starts = NearGoalStartConfig(**train_cfg.get("near_goal_starts", {}))
         self.behind_starts = BehindStartConfig(**train_cfg.get("behind_starts", {}))
+        self.behind_difficulty = self.behind_starts.initial  # saved in checkpoints, as the mass level
         self.critic_warmup_iterations = train_cfg.get("critic_warmup_iterations", 0)
         self.critic_warmup_learning_rate = train_cfg.get("critic_warmup_learning_rate")
         self.learning_rate = self.alg.learning_rate  # the configured one, restored after the warm-up
@@ -133,7 +134,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
                 if self.out_of_time(time_budget, evaluating):
                     raise TimeBudgetSpent
             iteration_start = time.time()
-            if self.curriculum.enabled or self.mass_curriculum.enabled:
+            if self.curriculum.enabled or self.mass_curriculum.enabled or self.behind_starts.enabled:
                 self.apply_curricula(fresh_run=it == 0)
             self._snapshot = {"iteration": it, **copy.deepcopy(self.training_state(next_iteration=it))}
             if evaluating:  # after the snapshot: an interrupted evaluation loses no iteration
@@ -207,8 +208,9 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             self.logger.run_state["/curriculum/disturbance_scale"] = scale
 
     def apply_curricula(self, fresh_run: bool) -> None:
-        """Sets the goal difficulty and the object mass range from the success rate of the episodes that ended since
-        the last call, over all processes (every process then draws its episodes at the same level)."""
+        """Sets the goal difficulty, the object mass range and the spread of the starts behind the object from the
+        success rate of the episodes that ended since the last call, over all processes (every process then draws its
+        episodes at the same levels)."""
         success_rate = self.training_success_rate()
         if self.curriculum.enabled:
             difficulty = self.curriculum.initial if fresh_run else self.curriculum.next_difficulty(
@@ -221,6 +223,10 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             low, high = self.mass_curriculum.mass_range(self.mass_difficulty, self.env.cfg.randomization.mass)
             self.env.set_object_mass_range(low, high)
             self.logger.run_state["/curriculum/object_mass_max"] = high
+        if self.behind_starts.enabled:
+            self.behind_difficulty = self.behind_starts.initial if fresh_run else self.behind_starts.next_difficulty(
+                self.behind_difficulty, success_rate)
+            self.apply_behind_starts()
 
     def training_success_rate(self) -> float | None:
         """Success rate of the training episodes that ended since the last call, over all processes (None: none)."""
@@ -238,11 +244,13 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self.logger.run_state["/curriculum/near_goal_share"] = cfg.share
 
     def apply_behind_starts(self) -> None:
-        """Sets the training environment's starts behind the object (at every launch: a resumed run's environment
-        starts with none) and logs their share (the logger keeps it for every iteration)."""
+        """Sets the training environment's starts behind the object at the current spread (at every launch: a resumed
+        run's environment starts with none) and logs share and spread (the logger keeps them for every iteration)."""
         cfg = self.behind_starts
-        self.env.set_behind_starts(cfg.share, cfg.spread)
+        spread = cfg.spread_at(self.behind_difficulty) if cfg.enabled else cfg.spread
+        self.env.set_behind_starts(cfg.share, spread)
         self.logger.run_state["/curriculum/behind_share"] = cfg.share
+        self.logger.run_state["/curriculum/behind_spread"] = spread
 
     def training_state(self, next_iteration: int) -> dict:
         """What a checkpoint holds: the algorithm's state, the iteration a resumed run starts at, the environment's
@@ -250,7 +258,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         saved = self.alg.save()
         saved["iter"] = next_iteration
         saved["infos"] = {"env_state": self.env.state_dict(), "torch_rng": torch.get_rng_state(),
-                          "mass_difficulty": self.mass_difficulty}
+                          "mass_difficulty": self.mass_difficulty, "behind_difficulty": self.behind_difficulty}
         return saved
 
     def save(self, path: str, infos: dict | None = None) -> None:
@@ -306,4 +314,5 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         if "torch_rng" in infos:
             torch.set_rng_state(infos["torch_rng"])
         self.mass_difficulty = infos.get("mass_difficulty", self.mass_curriculum.initial)
+        self.behind_difficulty = infos.get("behind_difficulty", self.behind_starts.initial)
         return infos

@@ -197,6 +197,35 @@ def test_behind_start_run_logs_its_share_and_eval_envs_never_start_behind(tmp_pa
     np.testing.assert_array_equal(PushEnv(PushEnvConfig(num_envs=1)).behind_start.numpy()[0], (0.0, 0.0))
 
 
+def test_behind_start_spread_follows_the_success_and_resumes_its_level(tmp_path):
+    """With ``behind_starts.enabled`` the spread is ``spread`` + level x (pi - ``spread``), the level following the
+    training success; it is set in the environment, logged, saved in checkpoints and read back by a resumed run."""
+    from dynpush.policies.curriculum import BehindStartConfig
+
+    cfg = BehindStartConfig(share=1.0, spread=0.5, enabled=True)
+    assert cfg.spread_at(0.0) == 0.5 and cfg.spread_at(1.0) == pytest.approx(np.pi)
+    assert cfg.spread_at(0.5) == pytest.approx(0.5 + 0.5 * (np.pi - 0.5))
+    with pytest.raises(ConfigError, match=r"^behind_starts.enabled widens the spread .*: set behind_starts.share > 0$"):
+        apply_overrides(tiny(1), ["behind_starts.enabled=True"]).validate()
+    run = tmp_path / "run"
+    overrides = ["behind_starts.share=1.0", "behind_starts.spread=0.3", "behind_starts.enabled=True",
+                 "behind_starts.initial=0.5"]
+    runner = train(apply_overrides(tiny(2), overrides), run)
+    spread = BehindStartConfig(spread=0.3).spread_at(0.5)
+    assert runner.behind_difficulty == 0.5  # too short for an episode to end: the level holds
+    np.testing.assert_allclose(runner.env.behind_start.numpy()[0], (1.0, spread), rtol=1e-6)
+    rows = [json.loads(line) for line in (run / "progress.jsonl").read_text().splitlines()]
+    assert [row["/curriculum/behind_spread"] for row in rows] == pytest.approx([spread, spread])
+    saved = torch.load(run / "model_1.pt", weights_only=False)
+    assert saved["infos"]["behind_difficulty"] == 0.5
+    saved["infos"]["behind_difficulty"] = 0.75
+    torch.save(saved, run / "model_1.pt")
+    resumed = train(apply_overrides(tiny(2), overrides), run, resume=True, extend_to=3)
+    assert resumed.behind_difficulty == 0.75
+    np.testing.assert_allclose(resumed.env.behind_start.numpy()[0], (1.0, BehindStartConfig(spread=0.3).spread_at(0.75)),
+                               rtol=1e-6)
+
+
 def test_near_goal_run_starts_near_and_eval_envs_never_do(tmp_path):
     """A 2-iteration run with every training reset near the goal: the share is logged per iteration and the episodes
     drawn after the first rollout start are near; a fresh environment (evaluation, export: built from ``env`` alone)

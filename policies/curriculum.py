@@ -2,8 +2,13 @@
 
 Goal difficulty: episodes are drawn as in the paper, but the goal asks for only ``d`` of the drawn yaw change
 (``PushEnv.set_goal_difficulty``: goal yaw ``yaw_object + d * dyaw``; the goal position is the drawn
-one). Scaling the goal *distance* as well was tried and fails: at small distances a robot that never
+one). Scaling the goal *distance* toward 0 was tried and fails: at small distances a robot that never
 touches the object succeeds often, so the policy learns to stay away.
+
+Goal distance: the goals are first drawn from a band away from the success radius (``initial_radius``, 0.4-0.6 m,
+the sanity task's 0.5 m), which widens to the configured ``sampling.goal_radius`` (``PushEnv.set_goal_radius_range``):
+no goal of the band is reached by staying away, and on the sanity task goals 0-2 m away instead of 0.5 m slow
+learning about fourfold (docs/ppo_fine_tuning.md).
 
 Object mass: the objects' masses are drawn from ``[m_low, m_high(d)]`` with ``m_high`` rising from ``initial_max`` to
 the configured ``randomization.mass`` maximum (``PushEnv.set_object_mass_range``). Our arm's PD joints yield
@@ -12,7 +17,7 @@ CaT terminates; on the sanity task (``benchmarks/ppo_sanity.py``) with the paper
 learning from scratch on 1-10 kg objects learns to keep away, while on 1-2 kg objects it learns to push
 (docs/ppo_fine_tuning.md).
 
-Both levels follow the training success rate (:class:`SuccessGatedLevel`): after every iteration a level rises by
+The levels follow the training success rate (:class:`SuccessGatedLevel`): after every iteration a level rises by
 ``step`` when the success rate of the episodes that ended during it (over all processes) exceeds ``promote_above``,
 and falls by ``step`` below ``demote_below``. Evaluation and export never use them: an environment starts with the
 paper's goals and the configured masses.
@@ -94,6 +99,27 @@ class ObjectMassCurriculumConfig(SuccessGatedLevel):
     def mass_range(self, difficulty: float, configured: tuple[float, float]) -> tuple[float, float]:
         """The (low, high) [kg] object masses at ``difficulty``, within the ``configured`` range."""
         return configured[0], self.initial_max + difficulty * (configured[1] - self.initial_max)
+
+
+@dataclass
+class GoalDistanceCurriculumConfig(SuccessGatedLevel):
+    """At difficulty ``d`` the goal lies ``lo(d)``-``hi(d)`` from the object's start (uniform by area), each bound
+    moving linearly from ``initial_radius`` at 0 to the configured ``sampling.goal_radius`` at 1. Ours, not the
+    paper's."""
+
+    initial_radius: tuple[float, float] = (0.4, 0.6)  # [m] the band at difficulty 0, beyond the 0.1 m success radius
+
+    def validate(self, prefix: str = "distance_curriculum", configured: tuple[float, float] = (0.0, 2.0)) -> None:
+        super().validate(prefix)
+        low, high = self.initial_radius
+        if not configured[0] <= low <= high <= configured[1]:
+            raise ConfigError(f"{prefix}.initial_radius must be (low, high) with low <= high within"
+                              f" env.sampling.goal_radius {tuple(configured)} m, got {self.initial_radius!r}")
+
+    def radius_range(self, difficulty: float, configured: tuple[float, float]) -> tuple[float, float]:
+        """The (low, high) [m] goal distances at ``difficulty``, within the ``configured`` range."""
+        (low0, high0), (low1, high1) = self.initial_radius, configured
+        return low0 + difficulty * (low1 - low0), high0 + difficulty * (high1 - high0)
 
 
 @dataclass

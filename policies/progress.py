@@ -224,6 +224,7 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     difficulty = series("/curriculum/goal_difficulty")
     mass_max = series("/curriculum/object_mass_max")
     behind_spread = series("/curriculum/behind_spread")
+    goal_radius_max = series("/curriculum/goal_radius_max")
     evaluations = read_evaluations(run_dir)
     rows = (4 if records else 1) + (2 if evaluations else 0)  # a DAgger-only run: rates only
     fig = Figure(figsize=(8.0, (9.5 if records else 3.5) + (4.5 if evaluations else 0.0)), layout="constrained")
@@ -240,6 +241,8 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
         ax_rate.plot(hours, 100.0 * difficulty, color="gray", ls="--", label="curriculum goal difficulty x 100")
     if np.isfinite(mass_max).any():
         ax_rate.plot(hours, 10.0 * mass_max, color="tab:orange", ls="--", label="curriculum heaviest object [kg] x 10")
+    if np.isfinite(goal_radius_max).any():
+        ax_rate.plot(hours, 10.0 * goal_radius_max, color="tab:purple", ls="--", label="curriculum farthest goal [m] x 10")
     if np.isfinite(behind_spread).any():
         ax_rate.plot(hours, 100.0 * behind_spread / np.pi, color="tab:blue", ls="--",
                      label="starts behind the object: spread [% of pi]")

@@ -26,7 +26,7 @@ from rsl_rl.runners import OnPolicyRunner
 from dynpush.policies.cat_ppo import CaTPPO
 from dynpush.policies.checkpoint_file import CheckpointError, read_checkpoint
 from dynpush.policies.curriculum import (
-    BehindStartConfig, GoalCurriculumConfig, NearGoalStartConfig, ObjectMassCurriculumConfig,
+    BehindStartConfig, GoalCurriculumConfig, GoalDistanceCurriculumConfig, NearGoalStartConfig, ObjectMassCurriculumConfig,
 )
 from dynpush.policies.progress import ProgressLogger
 from dynpush.policies.expert_regularization import ExpertImitationLoss
@@ -95,6 +95,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self.curriculum = GoalCurriculumConfig(**train_cfg.get("curriculum", {}))
         self.mass_curriculum = ObjectMassCurriculumConfig(**train_cfg.get("mass_curriculum", {}))
         self.mass_difficulty = self.mass_curriculum.initial  # saved in checkpoints: the environment keeps no level
+        self.distance_curriculum = GoalDistanceCurriculumConfig(**train_cfg.get("distance_curriculum", {}))
+        self.distance_difficulty = self.distance_curriculum.initial  # saved in checkpoints, as the mass level
         self.near_goal_starts = NearGoalStartConfig(**train_cfg.get("near_goal_starts", {}))
         self.behind_starts = BehindStartConfig(**train_cfg.get("behind_starts", {}))
         self.behind_difficulty = self.behind_starts.initial  # saved in checkpoints, as the mass level
@@ -134,7 +136,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
                 if self.out_of_time(time_budget, evaluating):
                     raise TimeBudgetSpent
             iteration_start = time.time()
-            if self.curriculum.enabled or self.mass_curriculum.enabled or self.behind_starts.enabled:
+            if any(level.enabled for level in (self.curriculum, self.mass_curriculum, self.distance_curriculum,
+                                               self.behind_starts)):
                 self.apply_curricula(fresh_run=it == 0)
             self._snapshot = {"iteration": it, **copy.deepcopy(self.training_state(next_iteration=it))}
             if evaluating:  # after the snapshot: an interrupted evaluation loses no iteration
@@ -208,8 +211,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             self.logger.run_state["/curriculum/disturbance_scale"] = scale
 
     def apply_curricula(self, fresh_run: bool) -> None:
-        """Sets the goal difficulty, the object mass range and the spread of the starts behind the object from the
-        success rate of the episodes that ended since the last call, over all processes (every process then draws its
+        """Sets the goal difficulty, the object mass range, the goal distance range and the spread of the starts behind
+        the object from the success rate of the episodes that ended since the last call, over all processes (every process then draws its
         episodes at the same levels)."""
         success_rate = self.training_success_rate()
         if self.curriculum.enabled:
@@ -223,6 +226,12 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             low, high = self.mass_curriculum.mass_range(self.mass_difficulty, self.env.cfg.randomization.mass)
             self.env.set_object_mass_range(low, high)
             self.logger.run_state["/curriculum/object_mass_max"] = high
+        if self.distance_curriculum.enabled:
+            self.distance_difficulty = self.distance_curriculum.initial if fresh_run else \
+                self.distance_curriculum.next_difficulty(self.distance_difficulty, success_rate)
+            low, high = self.distance_curriculum.radius_range(self.distance_difficulty, self.env.cfg.sampling.goal_radius)
+            self.env.set_goal_radius_range(low, high)
+            self.logger.run_state["/curriculum/goal_radius_max"] = high
         if self.behind_starts.enabled:
             self.behind_difficulty = self.behind_starts.initial if fresh_run else self.behind_starts.next_difficulty(
                 self.behind_difficulty, success_rate)
@@ -258,7 +267,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         saved = self.alg.save()
         saved["iter"] = next_iteration
         saved["infos"] = {"env_state": self.env.state_dict(), "torch_rng": torch.get_rng_state(),
-                          "mass_difficulty": self.mass_difficulty, "behind_difficulty": self.behind_difficulty}
+                          "mass_difficulty": self.mass_difficulty, "distance_difficulty": self.distance_difficulty,
+                          "behind_difficulty": self.behind_difficulty}
         return saved
 
     def save(self, path: str, infos: dict | None = None) -> None:
@@ -314,5 +324,6 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         if "torch_rng" in infos:
             torch.set_rng_state(infos["torch_rng"])
         self.mass_difficulty = infos.get("mass_difficulty", self.mass_curriculum.initial)
+        self.distance_difficulty = infos.get("distance_difficulty", self.distance_curriculum.initial)
         self.behind_difficulty = infos.get("behind_difficulty", self.behind_starts.initial)
         return infos

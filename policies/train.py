@@ -16,7 +16,9 @@ from pathlib import Path
 from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
 from dynpush.sim.config import ConfigError, PushEnvConfig
 
-from .curriculum import BehindStartConfig, GoalCurriculumConfig, NearGoalStartConfig, ObjectMassCurriculumConfig
+from .curriculum import (
+    BehindStartConfig, GoalCurriculumConfig, GoalDistanceCurriculumConfig, NearGoalStartConfig, ObjectMassCurriculumConfig,
+)
 from .expert_regularization import ExpertLabelledEnv
 from .fine_tune import MOVED_FIELDS, FineTuneConfig
 from .schedules import ConstraintCurriculumConfig
@@ -58,6 +60,7 @@ class TrainConfig:
     # Training objects from light to the configured masses (ours, policies/curriculum.py); evaluation draws from
     # env.randomization.mass.
     mass_curriculum: ObjectMassCurriculumConfig = field(default_factory=ObjectMassCurriculumConfig)
+    distance_curriculum: GoalDistanceCurriculumConfig = field(default_factory=GoalDistanceCurriculumConfig)
     # Training resets that start near the goal with the yaw off (ours, policies/curriculum.py); evaluation never
     # uses them: the evaluation environment is built from ``env`` alone (policies/trained_env.py).
     near_goal_starts: NearGoalStartConfig = field(default_factory=NearGoalStartConfig)
@@ -97,6 +100,7 @@ class TrainConfig:
         self.env.validate()
         self.curriculum.validate()
         self.mass_curriculum.validate(configured=self.env.randomization.mass)
+        self.distance_curriculum.validate(configured=self.env.sampling.goal_radius)
         self.near_goal_starts.validate()
         self.behind_starts.validate()
         if self.env.legged.enabled and not self.env.legged.locomotion_policy:
@@ -166,6 +170,7 @@ class TrainConfig:
             },
             "curriculum": dataclasses.asdict(self.curriculum),
             "mass_curriculum": dataclasses.asdict(self.mass_curriculum),
+            "distance_curriculum": dataclasses.asdict(self.distance_curriculum),
             "near_goal_starts": dataclasses.asdict(self.near_goal_starts),
             "behind_starts": dataclasses.asdict(self.behind_starts),
             "critic_warmup_iterations": self.fine_tune.critic_warmup_iterations,

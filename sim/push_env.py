@@ -152,6 +152,9 @@ class PushEnv(EnvBase, VecEnv):
         # (low, high) [kg] of the object masses drawn from now on: randomization.mass unless a training curriculum
         # narrows it; evaluation and export, which never set it, draw from the configured range.
         self.object_mass_range = wp.array([wp.vec2(*self.cfg.randomization.mass)], dtype=wp.vec2)
+        # (low, high) [m] of the goal distances drawn from now on: sampling.goal_radius unless a training curriculum
+        # narrows it; evaluation and export, which never set it, draw from the configured annulus.
+        self.goal_radius_range = wp.array([wp.vec2(*self.cfg.sampling.goal_radius)], dtype=wp.vec2)
         # (share, radius [m], max_yaw [rad]) of near-goal starts, a training-only curriculum; share 0: the paper's
         # goal distribution, so evaluation and export, which never set it, use that.
         self.near_goal = zeros(1, wp.vec3)
@@ -282,7 +285,7 @@ class PushEnv(EnvBase, VecEnv):
 
         s, rnd = cfg.sampling, cfg.randomization
         sp = sampling.SamplingParams()
-        for name in ("robot_radius", "goal_radius", "robot_bearing", "goal_bearing", "object_yaw", "goal_yaw", "base_yaw"):
+        for name in ("robot_radius", "robot_bearing", "goal_bearing", "object_yaw", "goal_yaw", "base_yaw"):
             setattr(sp, name, wp.vec2(*getattr(s, name)))
         sp.surface_target = int(s.reach_target_on_surface)
         sp.friction = wp.vec2(*rnd.friction)
@@ -435,8 +438,9 @@ class PushEnv(EnvBase, VecEnv):
     def _reset_flagged(self) -> None:
         """Draws and starts new episodes for worlds with ``reset_flags != 0`` (inside the captured step)."""
         self._launch(sampling.sample_episodes, [self.reset_flags, self.cfg.seed, self.sampling_params, self.goal_difficulty,
-                                                self.object_mass_range, self.near_goal, self.behind_start, self.task,
-                                                self.spec, self.near_goal_start, self.near_goal_ended])
+                                                self.object_mass_range, self.goal_radius_range, self.near_goal,
+                                                self.behind_start, self.task, self.spec, self.near_goal_start,
+                                                self.near_goal_ended])
         self._start_flagged()
 
     def _start_flagged(self) -> None:
@@ -564,6 +568,20 @@ class PushEnv(EnvBase, VecEnv):
     @property
     def object_mass_range_value(self) -> tuple[float, float]:
         low, high = self.object_mass_range.numpy()[0]
+        return float(low), float(high)
+
+    def set_goal_radius_range(self, low: float, high: float) -> None:
+        """Goals of episodes drawn from now on lie ``low``-``high`` [m] from the object's start (uniform by area), a
+        sub-range of ``sampling.goal_radius`` (a training curriculum, ``policies/curriculum.py``)."""
+        configured = self.cfg.sampling.goal_radius
+        if not configured[0] <= low <= high <= configured[1]:
+            raise ConfigError(f"goal radius range must lie within sampling.goal_radius {configured} m with low <= high,"
+                              f" got ({low!r}, {high!r})")
+        self.goal_radius_range.fill_(wp.vec2(low, high))
+
+    @property
+    def goal_radius_range_value(self) -> tuple[float, float]:
+        low, high = self.goal_radius_range.numpy()[0]
         return float(low), float(high)
 
     def set_near_goal_starts(self, share: float, radius: float, max_yaw: float) -> None:

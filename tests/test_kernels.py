@@ -421,7 +421,7 @@ def test_compute_terminations():
 def sampling_params(**overrides):
     p = sampling.SamplingParams()
     full = (-math.pi, math.pi)
-    values = dict(robot_radius=(1.2, 2.5), goal_radius=(0.0, 2.0), robot_bearing=full, goal_bearing=full,
+    values = dict(robot_radius=(1.2, 2.5), robot_bearing=full, goal_bearing=full,
                   object_yaw=full, goal_yaw=full, base_yaw=full, surface_target=1,
                   friction=(0.4, 1.25), ground_friction=0.4, com_fraction_lo=(-0.25, -0.25, -0.6),
                   com_fraction_hi=(0.25, 0.25, 0.25), size_lo=(0.25, 0.25, 0.4), size_hi=(0.75, 0.75, 1.0),
@@ -449,16 +449,17 @@ def random_spec(rng, n):
     ))
 
 
-def sample_episodes(reset, seed, params, task, spec, difficulty=1.0, object_mass=(1.0, 10.0), near_goal=(0.0, 0.0, 0.0),
-                    behind=(0.0, 0.0), start_flags=None):
-    """Launches ``sampling.sample_episodes``; ``object_mass`` = (low, high) [kg], ``near_goal`` = (share, radius [m],
-    max_yaw [rad]), ``behind`` = (share, spread [rad]), ``start_flags`` the worlds' near-goal flags before (default
-    0). Returns the near-goal flags (start, ended) after."""
+def sample_episodes(reset, seed, params, task, spec, difficulty=1.0, object_mass=(1.0, 10.0), goal_radius=(0.0, 2.0),
+                    near_goal=(0.0, 0.0, 0.0), behind=(0.0, 0.0), start_flags=None):
+    """Launches ``sampling.sample_episodes``; ``object_mass`` = (low, high) [kg], ``goal_radius`` = (low, high) [m],
+    ``near_goal`` = (share, radius [m], max_yaw [rad]), ``behind`` = (share, spread [rad]), ``start_flags`` the worlds'
+    near-goal flags before (default 0). Returns the near-goal flags (start, ended) after."""
     n = len(reset)
     start = arr(np.zeros(n) if start_flags is None else start_flags, int)
     ended = arr(np.full(n, -1), int)
     launch(sampling.sample_episodes, n, arr(reset, int), seed, params, arr([difficulty]),
-           wp.array([object_mass], dtype=wp.vec2, device=DEVICE), wp.array([near_goal], dtype=wp.vec3, device=DEVICE),
+           wp.array([object_mass], dtype=wp.vec2, device=DEVICE), wp.array([goal_radius], dtype=wp.vec2, device=DEVICE),
+           wp.array([near_goal], dtype=wp.vec3, device=DEVICE),
            wp.array([behind], dtype=wp.vec2, device=DEVICE), task, spec, start, ended)
     return start.numpy(), ended.numpy()
 
@@ -468,9 +469,9 @@ def test_sample_episodes_narrow_ranges():
     n = 4000
     _, task_np = random_state(np.random.default_rng(3), n)
     task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(4), n))
-    params = sampling_params(robot_bearing=(2.0, 2.5), goal_bearing=(-0.3, 0.1), goal_radius=(0.5, 0.8),
-                             object_yaw=(0.2, 0.2), goal_yaw=(-1.0, -0.5), base_yaw=(3.0, 3.1))
-    sample_episodes(np.ones(n), 5, params, task, spec)
+    params = sampling_params(robot_bearing=(2.0, 2.5), goal_bearing=(-0.3, 0.1), object_yaw=(0.2, 0.2),
+                             goal_yaw=(-1.0, -0.5), base_yaw=(3.0, 3.1))
+    sample_episodes(np.ones(n), 5, params, task, spec, goal_radius=(0.5, 0.8))
     out = read_struct(sampling.EpisodeSpec, spec)
     goal, base = out["goal"], out["base"]
     bearing = lambda xy: np.arctan2(xy[:, 1], xy[:, 0])  # noqa: E731
@@ -523,6 +524,28 @@ def test_object_mass_range_bounds_the_mass_and_nothing_else():
     for name in full:
         if name != "mass":
             close(light[name], full[name], atol=0, err_msg=name)
+
+
+def test_goal_radius_range_moves_the_goal_along_its_bearing_and_nothing_else():
+    """Distance curriculum: a narrower (low, high) draws the goal uniform by area in that annulus, from the same draw
+    (same bearing and yaw); every other draw is unchanged."""
+    n = 4000
+    out = {}
+    for radius in ((0.0, 2.0), (0.4, 0.6)):
+        _, task_np = random_state(np.random.default_rng(3), n)  # identical random streams for both ranges
+        task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(4), n))
+        sample_episodes(np.ones(n), 9, sampling_params(), task, spec, goal_radius=radius)
+        out[radius] = read_struct(sampling.EpisodeSpec, spec)
+    near, full = out[(0.4, 0.6)]["goal"], out[(0.0, 2.0)]["goal"]
+    r_near, r_full = np.linalg.norm(near[:, :2], axis=1), np.linalg.norm(full[:, :2], axis=1)
+    assert r_near.min() >= 0.4 - 1e-5 and r_near.max() <= 0.6 + 1e-5
+    assert_uniform((r_near**2 - 0.16) / 0.2, "goal r^2 in the narrowed annulus")
+    close((r_near**2 - 0.16) / 0.2, r_full**2 / 4.0, atol=1e-4)  # the same draw, rescaled
+    close(np.arctan2(near[:, 1], near[:, 0]), np.arctan2(full[:, 1], full[:, 0]), atol=1e-4)
+    close(near[:, 2], full[:, 2], atol=0)
+    for name in out[(0.0, 2.0)]:
+        if name != "goal":
+            close(out[(0.4, 0.6)][name], out[(0.0, 2.0)][name], atol=0, err_msg=name)
 
 
 def test_behind_starts_put_the_robot_opposite_the_goal_facing_the_object():

@@ -321,7 +321,37 @@ def test_mass_curriculum_maps_its_level_onto_the_configured_masses():
         apply_overrides(tiny(1), ["mass_curriculum.initial_max=0.5"]).validate()
 
 
+def test_distance_curriculum_moves_its_band_to_the_configured_goals_and_resumes_its_level(tmp_path):
+    from dynpush.policies.curriculum import GoalDistanceCurriculumConfig
+    from dynpush.sim.config import PushEnvConfig
+    from dynpush.sim.push_env import PushEnv
+
+    cfg = GoalDistanceCurriculumConfig(enabled=True, initial_radius=(0.4, 0.6))
+    assert cfg.radius_range(0.0, (0.0, 2.0)) == (0.4, 0.6)
+    assert cfg.radius_range(0.5, (0.0, 2.0)) == pytest.approx((0.2, 1.3))
+    assert cfg.radius_range(1.0, (0.0, 2.0)) == (0.0, 2.0)
+    run = tmp_path / "run"
+    overrides = ["distance_curriculum.enabled=True", "distance_curriculum.initial_radius=(0.5, 0.7)"]
+    runner = train(apply_overrides(tiny(2), overrides), run)
+    assert runner.env.goal_radius_range_value == pytest.approx((0.5, 0.7))
+    runner.env.reset()  # episodes drawn from now on
+    goals = runner.env.spec.goal.numpy()
+    assert np.all(np.abs(np.linalg.norm(goals[:, :2], axis=1) - 0.6) <= 0.1 + 1e-5)
+    assert PushEnv(PushEnvConfig(num_envs=1)).goal_radius_range_value == (0.0, 2.0)
+    with pytest.raises(ConfigError, match="goal radius range must lie within sampling.goal_radius"):
+        runner.env.set_goal_radius_range(0.5, 2.5)
+    rows = [json.loads(line) for line in (run / "progress.jsonl").read_text().splitlines()]
+    assert [row["/curriculum/goal_radius_max"] for row in rows] == pytest.approx([0.7, 0.7])
+    saved = torch.load(run / "model_1.pt", weights_only=False)
+    saved["infos"]["distance_difficulty"] = 0.5  # a level reached later in a run
+    torch.save(saved, run / "model_1.pt")
+    resumed = train(apply_overrides(tiny(2), overrides), run, resume=True, extend_to=3)
+    assert resumed.distance_difficulty == 0.5 and resumed.env.goal_radius_range_value == pytest.approx((0.25, 1.35))
+
+
 @pytest.mark.parametrize("override, message", [
+    ("distance_curriculum.initial_radius=(0.6, 0.4)", r"^distance_curriculum.initial_radius must be \(low, high\)"),
+    ("distance_curriculum.step=1.5", r"^distance_curriculum.step must lie in \[0, 1\], got 1.5$"),
     ("curriculum.initial=-0.1", r"^curriculum.initial must lie in \[0, 1\], got -0.1$"),
     ("curriculum.demote_below=0.5", r"^curriculum.demote_below must be <= curriculum.promote_above$"),
     ("mass_curriculum.promote_above=1.5", r"^mass_curriculum.promote_above must lie in \[0, 1\], got 1.5$"),

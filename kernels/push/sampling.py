@@ -22,7 +22,6 @@ SHAPE_CYLINDER = 1
 @wp.struct
 class SamplingParams:
     robot_radius: wp.vec2  # [m]
-    goal_radius: wp.vec2  # [m]
     robot_bearing: wp.vec2  # polar angle of the base position [rad]
     goal_bearing: wp.vec2  # polar angle of the goal position [rad]
     object_yaw: wp.vec2  # [rad]
@@ -123,6 +122,7 @@ def sample_episodes(
     params: SamplingParams,
     goal_difficulty: wp.array(dtype=float),
     object_mass: wp.array(dtype=wp.vec2),
+    goal_radius: wp.array(dtype=wp.vec2),
     near_goal: wp.array(dtype=wp.vec3),
     behind_start: wp.array(dtype=wp.vec2),
     task: PushTask,
@@ -139,6 +139,9 @@ def sample_episodes(
 
     ``object_mass[0]`` = (low, high) [kg]: the range the object's mass is drawn from, uniform (the configured
     ``randomization.mass`` unless a training curriculum narrows it).
+
+    ``goal_radius[0]`` = (low, high) [m]: the annulus the goal position is drawn from, uniform by area (the configured
+    ``sampling.goal_radius`` unless a training curriculum narrows it).
 
     ``near_goal[0]`` = (share, radius [m], max_yaw [rad]) (a training-only start-state curriculum; share 0 is the
     paper's task): with probability ``share`` a world's goal is instead drawn near the object's start, uniform (by
@@ -178,7 +181,7 @@ def sample_episodes(
     if params.surface_target != 0:
         spec.reach_target_o[w] = surface_point(fork_rng(wp.randi(rng)), shape, d)
     # Goal and robot uniform by area in their annuli.
-    goal = polar_pose(fork_rng(wp.randi(rng)), params.goal_radius, params.goal_bearing, params.goal_yaw)
+    goal = polar_pose(fork_rng(wp.randi(rng)), goal_radius[0], params.goal_bearing, params.goal_yaw)
     difficulty = goal_difficulty[0]
     yaw_change = wp.atan2(wp.sin(goal[2] - object_yaw), wp.cos(goal[2] - object_yaw))
     goal_yaw = wp.where(difficulty < 1.0, object_yaw + difficulty * yaw_change, goal[2])

@@ -27,6 +27,7 @@ from dynpush.policies.cat_ppo import CaTPPO
 from dynpush.policies.checkpoint_file import CheckpointError, read_checkpoint
 from dynpush.policies.curriculum import (
     BehindStartConfig, GoalCurriculumConfig, GoalDistanceCurriculumConfig, NearGoalStartConfig, ObjectMassCurriculumConfig,
+    SuccessGatedLevel,
 )
 from dynpush.policies.progress import ProgressLogger
 from dynpush.policies.expert_regularization import ExpertImitationLoss
@@ -212,29 +213,29 @@ class CaTOnPolicyRunner(OnPolicyRunner):
 
     def apply_curricula(self, fresh_run: bool) -> None:
         """Sets the goal difficulty, the object mass range, the goal distance range and the spread of the starts behind
-        the object from the success rate of the episodes that ended since the last call, over all processes (every process then draws its
-        episodes at the same levels)."""
+        the object from the success rate of the episodes that ended since the last call, over all processes (every
+        process then draws its episodes at the same levels)."""
         success_rate = self.training_success_rate()
+
+        def next_level(cfg: SuccessGatedLevel, level: float) -> float:
+            return cfg.initial if fresh_run else cfg.next_difficulty(level, success_rate)
+
         if self.curriculum.enabled:
-            difficulty = self.curriculum.initial if fresh_run else self.curriculum.next_difficulty(
-                self.env.goal_difficulty_value, success_rate)
+            difficulty = next_level(self.curriculum, self.env.goal_difficulty_value)
             self.env.set_goal_difficulty(difficulty)
             self.logger.run_state["/curriculum/goal_difficulty"] = difficulty
         if self.mass_curriculum.enabled:
-            self.mass_difficulty = self.mass_curriculum.initial if fresh_run else self.mass_curriculum.next_difficulty(
-                self.mass_difficulty, success_rate)
+            self.mass_difficulty = next_level(self.mass_curriculum, self.mass_difficulty)
             low, high = self.mass_curriculum.mass_range(self.mass_difficulty, self.env.cfg.randomization.mass)
             self.env.set_object_mass_range(low, high)
             self.logger.run_state["/curriculum/object_mass_max"] = high
         if self.distance_curriculum.enabled:
-            self.distance_difficulty = self.distance_curriculum.initial if fresh_run else \
-                self.distance_curriculum.next_difficulty(self.distance_difficulty, success_rate)
+            self.distance_difficulty = next_level(self.distance_curriculum, self.distance_difficulty)
             low, high = self.distance_curriculum.radius_range(self.distance_difficulty, self.env.cfg.sampling.goal_radius)
             self.env.set_goal_radius_range(low, high)
             self.logger.run_state["/curriculum/goal_radius_max"] = high
         if self.behind_starts.enabled:
-            self.behind_difficulty = self.behind_starts.initial if fresh_run else self.behind_starts.next_difficulty(
-                self.behind_difficulty, success_rate)
+            self.behind_difficulty = next_level(self.behind_starts, self.behind_difficulty)
             self.apply_behind_starts()
 
     def training_success_rate(self) -> float | None:

@@ -76,6 +76,7 @@ class LocomotionTrainConfig:
             raise ConfigError(f"disturbance_ramp must be (start, end) iterations, got {self.disturbance_ramp!r}")
         DisturbanceRampConfig(*self.disturbance_ramp).validate()
         self.ppo.validate()
+        self.network.validate()
         return self
 
     def to_dict(self) -> dict:

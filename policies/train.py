@@ -119,6 +119,7 @@ class TrainConfig:
             if len(pair) != 2 or not all(0.0 <= p <= 1.0 for p in pair):
                 raise ConfigError(f"p_max_overrides[{name!r}] must be (initial, final) within [0, 1], got {pair!r}")
         self.ppo.validate()
+        self.network.validate()
         for name, low in (("eval_interval", 0), ("eval_episodes", 1), ("keep_checkpoints", 0)):
             if not isinstance(getattr(self, name), int) or getattr(self, name) < low:
                 raise ConfigError(f"{name} must be an integer >= {low}, got {getattr(self, name)!r}")

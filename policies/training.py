@@ -106,10 +106,23 @@ class NetworkConfig:
     actor_hidden: tuple[int, ...] = (256, 128, 64)
     critic_hidden: tuple[int, ...] = (256, 128, 64)
     init_noise_std: float = 1.0
+    # A floor under the action noise (ours; 0: none). CaT prices constraint violations that the noise itself causes
+    # (action-rate limits, most of all), and the action-rate reward pays for less noise, so a learnt std can shrink
+    # before the task is found (docs/ppo_fine_tuning.md); rsl_rl clamps the std parameter to it.
+    min_noise_std: float = 0.0
     # Whether the actor's observation normaliser keeps its statistics (ours). None: held in a run that starts from
     # another policy (--init-from), whose weights were fitted to those statistics; re-normalising the inputs under
     # them changes what the actor does before any update (docs/ppo_fine_tuning.md). Fixed when the run is created.
     hold_actor_normalizer: bool | None = None
+
+    def validate(self, prefix: str = "network") -> NetworkConfig:
+        """Raises a ConfigError naming the first field out of its range."""
+        if not self.init_noise_std > 0.0:
+            raise ConfigError(f"{prefix}.init_noise_std must be > 0, got {self.init_noise_std!r}")
+        if not 0.0 <= self.min_noise_std <= self.init_noise_std:
+            raise ConfigError(f"{prefix}.min_noise_std must lie in [0, {prefix}.init_noise_std ="
+                              f" {self.init_noise_std:g}], got {self.min_noise_std!r}")
+        return self
 
 
 def rsl_rl_runner_cfg(num_steps_per_env: int, save_interval: int, ppo: PPOConfig, network: NetworkConfig) -> dict:
@@ -122,7 +135,8 @@ def rsl_rl_runner_cfg(num_steps_per_env: int, save_interval: int, ppo: PPOConfig
         "obs_groups": {"actor": ["policy"], "critic": ["critic"]},
         "algorithm": dataclasses.asdict(ppo),
         "actor": {**mlp, "hidden_dims": list(network.actor_hidden),
-                  "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": network.init_noise_std}},
+                  "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": network.init_noise_std,
+                                       "std_range": (network.min_noise_std, 1e6)}},
         "critic": {**mlp, "hidden_dims": list(network.critic_hidden)},
         "logger": "tensorboard",
         "check_for_nan": True,

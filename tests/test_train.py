@@ -321,6 +321,22 @@ def test_mass_curriculum_maps_its_level_onto_the_configured_masses():
         apply_overrides(tiny(1), ["mass_curriculum.initial_max=0.5"]).validate()
 
 
+def test_min_noise_std_is_a_floor_under_the_learnt_action_noise():
+    from dynpush.policies.actor import build_actor
+    from dynpush.policies.training import set_action_std
+
+    cfg = apply_overrides(tiny(1), ["network.init_noise_std=0.5", "network.min_noise_std=0.3"]).validate()
+    actor = build_actor(cfg)
+    set_action_std(actor, 0.1)  # as if PPO had shrunk it
+    actor.distribution.update(torch.zeros(2, 11))
+    assert torch.allclose(actor.distribution.std, torch.full((2, 11), 0.3))
+    set_action_std(actor, 0.45)
+    actor.distribution.update(torch.zeros(2, 11))
+    assert torch.allclose(actor.distribution.std, torch.full((2, 11), 0.45))
+    with pytest.raises(ConfigError, match=r"^network.min_noise_std must lie in \[0, network.init_noise_std = 0.5\], got 0.6$"):
+        apply_overrides(tiny(1), ["network.init_noise_std=0.5", "network.min_noise_std=0.6"]).validate()
+
+
 def test_distance_curriculum_moves_its_band_to_the_configured_goals_and_resumes_its_level(tmp_path):
     from dynpush.policies.curriculum import GoalDistanceCurriculumConfig
     from dynpush.sim.config import PushEnvConfig

@@ -225,6 +225,7 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     mass_max = series("/curriculum/object_mass_max")
     behind_spread = series("/curriculum/behind_spread")
     goal_radius_max = series("/curriculum/goal_radius_max")
+    success_angle = series("/curriculum/success_angle_deg")
     evaluations = read_evaluations(run_dir)
     rows = (4 if records else 1) + (2 if evaluations else 0)  # a DAgger-only run: rates only
     fig = Figure(figsize=(8.0, (9.5 if records else 3.5) + (4.5 if evaluations else 0.0)), layout="constrained")
@@ -243,6 +244,9 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
         ax_rate.plot(hours, 10.0 * mass_max, color="tab:orange", ls="--", label="curriculum heaviest object [kg] x 10")
     if np.isfinite(goal_radius_max).any():
         ax_rate.plot(hours, 10.0 * goal_radius_max, color="tab:purple", ls="--", label="curriculum farthest goal [m] x 10")
+    if np.isfinite(success_angle).any():
+        ax_rate.plot(hours, 100.0 * success_angle / 180.0, color="tab:olive", ls="--",
+                     label="curriculum success angle [% of 180 deg]")
     if np.isfinite(behind_spread).any():
         ax_rate.plot(hours, 100.0 * behind_spread / np.pi, color="tab:blue", ls="--",
                      label="starts behind the object: spread [% of pi]")

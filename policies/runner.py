@@ -212,9 +212,9 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             self.logger.run_state["/curriculum/disturbance_scale"] = scale
 
     def apply_curricula(self, fresh_run: bool) -> None:
-        """Sets the goal difficulty, the object mass range, the goal distance range and the spread of the starts behind
-        the object from the success rate of the episodes that ended since the last call, over all processes (every
-        process then draws its episodes at the same levels)."""
+        """Sets the goal difficulty (and success angle), the object mass range, the goal distance range and the spread
+        of the starts behind the object from the success rate of the episodes that ended since the last call, over all
+        processes (every process then draws its episodes at the same levels)."""
         success_rate = self.training_success_rate()
 
         def next_level(cfg: SuccessGatedLevel, level: float) -> float:
@@ -224,6 +224,10 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             difficulty = next_level(self.curriculum, self.env.goal_difficulty_value)
             self.env.set_goal_difficulty(difficulty)
             self.logger.run_state["/curriculum/goal_difficulty"] = difficulty
+            if self.curriculum.initial_success_angle_deg is not None:
+                angle = self.curriculum.success_angle_deg(difficulty, self.env.cfg.rewards.success_angle_deg)
+                self.env.set_success_angle(angle)
+                self.logger.run_state["/curriculum/success_angle_deg"] = angle
         if self.mass_curriculum.enabled:
             self.mass_difficulty = next_level(self.mass_curriculum, self.mass_difficulty)
             low, high = self.mass_curriculum.mass_range(self.mass_difficulty, self.env.cfg.randomization.mass)

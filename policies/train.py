@@ -98,7 +98,7 @@ class TrainConfig:
 
     def validate(self) -> TrainConfig:
         self.env.validate()
-        self.curriculum.validate()
+        self.curriculum.validate(configured_angle_deg=self.env.rewards.success_angle_deg)
         self.mass_curriculum.validate(configured=self.env.randomization.mass)
         self.distance_curriculum.validate(configured=self.env.sampling.goal_radius)
         self.near_goal_starts.validate()

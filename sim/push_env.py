@@ -248,9 +248,11 @@ class PushEnv(EnvBase, VecEnv):
         rp.sigma_base_rate, rp.sigma_arm_rate = r.sigma_base_rate, r.sigma_arm_rate
         rp.success_task_reward = r.success_task_reward
         rp.success_distance = r.success_distance
-        rp.success_angle = math.radians(r.success_angle_deg)
         rp.arm_scale = cfg.actions.arm_scale
         self.reward_params = rp
+        # [rad] the success angle of the steps from now on: success_angle_deg unless a training curriculum widens it;
+        # evaluation and export, which never set it, count the configured one.
+        self.success_angle = wp.array([math.radians(r.success_angle_deg)], dtype=float)
 
         c = cfg.constraints
         arm = constraints_k.ArmLimits()
@@ -424,8 +426,8 @@ class PushEnv(EnvBase, VecEnv):
         with self._stage("kernels"):
             self._launch(sampling.apply_pushes, [seed, self.sampling_params, view, self.task, self.state_0.body_qd])
             newton.eval_ik(model, self.state_0, self.state_0.joint_q, self.state_0.joint_qd)
-            self._launch(rewards_k.compute_rewards, [view, self.task, self.reward_params, self.base_scale, self.reward,
-                                                     self.reward_terms, self.success])
+            self._launch(rewards_k.compute_rewards, [view, self.task, self.reward_params, self.success_angle,
+                                                     self.base_scale, self.reward, self.reward_terms, self.success])
             self._launch(constraints_k.compute_constraints, [view, self.task, self.arm_limits, self.constraint_params,
                                                              self.constraints])
             self._robot_constraints()
@@ -569,6 +571,20 @@ class PushEnv(EnvBase, VecEnv):
     def object_mass_range_value(self) -> tuple[float, float]:
         low, high = self.object_mass_range.numpy()[0]
         return float(low), float(high)
+
+    def set_success_angle(self, degrees: float) -> None:
+        """From the next step on, an object within ``degrees`` of its goal's rotation (and within the success
+        distance) succeeds: ``rewards.success_angle_deg`` or more, up to 180 (a training curriculum,
+        ``policies/curriculum.py``)."""
+        configured = self.cfg.rewards.success_angle_deg
+        if not configured <= degrees <= 180.0:
+            raise ConfigError(f"success angle must lie in [rewards.success_angle_deg = {configured:g}, 180] deg,"
+                              f" got {degrees!r}")
+        self.success_angle.fill_(math.radians(degrees))
+
+    @property
+    def success_angle_deg_value(self) -> float:
+        return math.degrees(float(self.success_angle.numpy()[0]))
 
     def set_goal_radius_range(self, low: float, high: float) -> None:
         """Goals of episodes drawn from now on lie ``low``-``high`` [m] from the object's start (uniform by area), a

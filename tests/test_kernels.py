@@ -299,40 +299,42 @@ def test_compute_rewards():
     sig = dict(sigma_reach=0.8, sigma_velocity=1.3, sigma_task=0.7, sigma_base_rate=1.1, sigma_arm_rate=0.9)
     for k, v in sig.items():
         setattr(prm, k, v)
-    prm.success_task_reward, prm.success_distance, prm.success_angle, prm.arm_scale = 2.0, 0.1, math.radians(10.0), 0.5
+    prm.success_task_reward, prm.success_distance, prm.arm_scale = 2.0, 0.1, 0.5
     base_scale = rng.uniform(0.2, 1.0, 6).astype(np.float32)
-    robot, task = structs(robot_np, task_np)
-    reward, terms = wp.zeros(n, dtype=float, device=DEVICE), wp.zeros((n, 4), dtype=float, device=DEVICE)
-    success = wp.zeros(n, dtype=int, device=DEVICE)
-    launch(rewards.compute_rewards, n, robot, task, prm, arr(base_scale), reward, terms, success)
-
     p_g, q_g = task_np["goal_pos"], task_np["goal_quat"]
     rel = 2.0 * np.arccos(np.clip(np.abs(np.sum(q_o * q_g, axis=1)), 0.0, 1.0))
-    is_success = (np.linalg.norm(p_g - p_o, axis=1) <= 0.1) & (rel <= math.radians(10.0))
-    dims = task_np["object_dims"]
-    keypoint_gap = (obb_vertices(p_g, q_g, dims) - obb_vertices(p_o, q_o, dims)).reshape(n, 24)
-    r1 = np.exp(-np.linalg.norm(keypoint_gap, axis=1) / sig["sigma_task"] ** 2)
-    p_e = transform_point(robot_np["body_q"][robot_np["ee_body"]], robot_np["ee_offset"])
-    p_r = transform_point(robot_np["body_q"][obj], task_np["reach_target_o"])
-    r2 = np.exp(-np.linalg.norm(p_e - p_r, axis=1) / sig["sigma_reach"] ** 2)
-    qd_o = robot_np["body_qd"][obj]
-    c_w = transform_point(robot_np["body_q"][obj], task_np["object_com_o"])
-    v_o = qd_o[:, :3] + np.cross(qd_o[:, 3:], p_o - c_w)  # velocity of the object frame origin
-    r3 = np.exp(np.sum(unit(v_o) * unit(p_g - p_o), axis=1) / sig["sigma_velocity"] ** 2 - 1.0)
-    da = task_np["actions"] - task_np["last_actions"]
-    r4 = (np.exp(-np.linalg.norm(base_scale * da[:, :6], axis=1) / sig["sigma_base_rate"] ** 2)
-          + np.exp(-np.linalg.norm(0.5 * da[:, 6:], axis=1) / sig["sigma_arm_rate"] ** 2))
-    r1 = np.where(is_success, 2.0, r1)  # III-D: r1 = 2, r2 held, r3 = 0 on success
-    r2 = np.where(is_success, task_np["reach_reward_held"], r2)
-    r3 = np.where(is_success, 0.0, r3)
-    ref_terms = np.column_stack([r1, r2, r3, r4])
+    for success_angle_deg, expected in ((10.0, near & (case == 0)), (45.0, near & (case < 2))):  # 45: a curriculum's
+        robot, task = structs(robot_np, task_np)
+        reward, terms = wp.zeros(n, dtype=float, device=DEVICE), wp.zeros((n, 4), dtype=float, device=DEVICE)
+        success = wp.zeros(n, dtype=int, device=DEVICE)
+        launch(rewards.compute_rewards, n, robot, task, prm, arr([math.radians(success_angle_deg)]), arr(base_scale),
+               reward, terms, success)
 
-    np.testing.assert_array_equal(is_success, near & (case == 0))
-    np.testing.assert_array_equal(success.numpy(), is_success.astype(int))
-    close(terms.numpy(), ref_terms, atol=1e-5)
-    close(reward.numpy(), ref_terms @ task_np["reward_weights"], atol=1e-5)
-    close(task.reach_reward_held.numpy(), r2, atol=1e-5, err_msg="held r2 = this step's r2")
-    assert np.allclose(terms.numpy()[w % 8 == 7, 2][~is_success[w % 8 == 7]], math.exp(-1.0), atol=1e-6)
+        is_success = (np.linalg.norm(p_g - p_o, axis=1) <= 0.1) & (rel <= math.radians(success_angle_deg))
+        dims = task_np["object_dims"]
+        keypoint_gap = (obb_vertices(p_g, q_g, dims) - obb_vertices(p_o, q_o, dims)).reshape(n, 24)
+        r1 = np.exp(-np.linalg.norm(keypoint_gap, axis=1) / sig["sigma_task"] ** 2)
+        p_e = transform_point(robot_np["body_q"][robot_np["ee_body"]], robot_np["ee_offset"])
+        p_r = transform_point(robot_np["body_q"][obj], task_np["reach_target_o"])
+        r2 = np.exp(-np.linalg.norm(p_e - p_r, axis=1) / sig["sigma_reach"] ** 2)
+        qd_o = robot_np["body_qd"][obj]
+        c_w = transform_point(robot_np["body_q"][obj], task_np["object_com_o"])
+        v_o = qd_o[:, :3] + np.cross(qd_o[:, 3:], p_o - c_w)  # velocity of the object frame origin
+        r3 = np.exp(np.sum(unit(v_o) * unit(p_g - p_o), axis=1) / sig["sigma_velocity"] ** 2 - 1.0)
+        da = task_np["actions"] - task_np["last_actions"]
+        r4 = (np.exp(-np.linalg.norm(base_scale * da[:, :6], axis=1) / sig["sigma_base_rate"] ** 2)
+              + np.exp(-np.linalg.norm(0.5 * da[:, 6:], axis=1) / sig["sigma_arm_rate"] ** 2))
+        r1 = np.where(is_success, 2.0, r1)  # III-D: r1 = 2, r2 held, r3 = 0 on success
+        r2 = np.where(is_success, task_np["reach_reward_held"], r2)
+        r3 = np.where(is_success, 0.0, r3)
+        ref_terms = np.column_stack([r1, r2, r3, r4])
+
+        np.testing.assert_array_equal(is_success, expected)
+        np.testing.assert_array_equal(success.numpy(), is_success.astype(int))
+        close(terms.numpy(), ref_terms, atol=1e-5)
+        close(reward.numpy(), ref_terms @ task_np["reward_weights"], atol=1e-5)
+        close(task.reach_reward_held.numpy(), r2, atol=1e-5, err_msg="held r2 = this step's r2")
+        assert np.allclose(terms.numpy()[w % 8 == 7, 2][~is_success[w % 8 == 7]], math.exp(-1.0), atol=1e-6)
 
 
 # --------------------------------------------------------------------------- constraints (Table "Rewards and constraints")

@@ -169,6 +169,27 @@ def test_curriculum_run_starts_easy_and_eval_envs_stay_at_the_papers_task(tmp_pa
     assert PushEnv(PushEnvConfig(num_envs=1)).goal_difficulty_value == 1.0
 
 
+def test_goal_curriculum_widens_the_success_angle_at_low_levels(tmp_path):
+    from dynpush.policies.curriculum import GoalCurriculumConfig
+    from dynpush.sim.config import PushEnvConfig
+    from dynpush.sim.push_env import PushEnv
+
+    cfg = GoalCurriculumConfig(enabled=True, initial_success_angle_deg=180.0)
+    assert cfg.success_angle_deg(0.0, 10.0) == 180.0 and cfg.success_angle_deg(1.0, 10.0) == 10.0
+    assert cfg.success_angle_deg(0.5, 10.0) == 95.0 and GoalCurriculumConfig().success_angle_deg(0.0, 10.0) == 10.0
+    with pytest.raises(ConfigError, match=r"^curriculum.initial_success_angle_deg must lie in \[env.rewards.success_angle_deg"
+                                          r" = 10, 180\], got 5.0$"):
+        apply_overrides(tiny(1), ["curriculum.initial_success_angle_deg=5.0"]).validate()
+    overrides = ["curriculum.enabled=True", "curriculum.initial=0.5", "curriculum.initial_success_angle_deg=170.0"]
+    runner = train(apply_overrides(tiny(2), overrides), tmp_path / "run")
+    assert runner.env.success_angle_deg_value == pytest.approx(90.0, abs=1e-4)  # no episode ended: the level holds
+    rows = [json.loads(line) for line in (tmp_path / "run" / "progress.jsonl").read_text().splitlines()]
+    assert [row["/curriculum/success_angle_deg"] for row in rows] == pytest.approx([90.0, 90.0])
+    assert PushEnv(PushEnvConfig(num_envs=1)).success_angle_deg_value == pytest.approx(10.0)
+    with pytest.raises(ConfigError, match=r"^success angle must lie in \[rewards.success_angle_deg = 10, 180\] deg"):
+        runner.env.set_success_angle(5.0)
+
+
 def test_near_goal_start_config_is_checked():
     from dynpush.policies.curriculum import NearGoalStartConfig
 

@@ -26,7 +26,6 @@ class RewardParams:
     sigma_arm_rate: float
     success_task_reward: float
     success_distance: float  # [m]
-    success_angle: float  # [rad]
     arm_scale: float
 
 
@@ -44,12 +43,16 @@ def compute_rewards(
     robot: RobotView,
     task: PushTask,
     params: RewardParams,
+    success_angle: wp.array(dtype=float),
     base_scale: wp.array(dtype=float),
     reward: wp.array(dtype=float),
     reward_terms: wp.array2d(dtype=float),
     success: wp.array(dtype=int),
 ):
-    """Writes the weighted total, the four unweighted terms and the success flag of each world."""
+    """Writes the weighted total, the four unweighted terms and the success flag of each world.
+
+    ``success_angle[0]`` [rad]: the largest rotation from the goal that counts as success (the configured
+    ``success_angle_deg`` unless a training curriculum widens it)."""
     w = wp.tid()
     x_o = robot.body_q[robot.object_body[w]]
     p_o = wp.transform_get_translation(x_o)
@@ -57,7 +60,7 @@ def compute_rewards(
     p_g = task.goal_pos[w]
     q_g = task.goal_quat[w]
 
-    is_success = wp.length(p_g - p_o) <= params.success_distance and rotation_angle(q_o, q_g) <= params.success_angle
+    is_success = wp.length(p_g - p_o) <= params.success_distance and rotation_angle(q_o, q_g) <= success_angle[0]
 
     r1 = wp.exp(-keypoint_distance(p_o, q_o, p_g, q_g, task.object_dims[w]) / (params.sigma_task * params.sigma_task))
     p_e = wp.transform_point(robot.body_q[robot.ee_body[w]], robot.ee_offset)

@@ -44,6 +44,21 @@ REWARD_TERMS = ("task", "reach", "object_velocity", "action_rate")
 CONSTRAINT_GROUPS = constraints_k.CONSTRAINT_GROUPS
 
 
+def set_sub_range(array: wp.array, what: str, field: str, configured: tuple[float, float], unit: str, low: float,
+                  high: float) -> None:
+    """Writes (``low``, ``high``) into the one-element vec2 ``array`` once it lies within the ``configured`` range of
+    config ``field``; a ConfigError naming both otherwise."""
+    if not configured[0] <= low <= high <= configured[1]:
+        raise ConfigError(f"{what} must lie within {field} {configured} {unit} with low <= high, got ({low!r}, {high!r})")
+    array.fill_(wp.vec2(low, high))
+
+
+def range_value(array: wp.array) -> tuple[float, float]:
+    """The (low, high) held by a one-element vec2 ``array``."""
+    low, high = array.numpy()[0]
+    return float(low), float(high)
+
+
 class PushEnv(EnvBase, VecEnv):
     """Goal pushing with a tracked-base mobile manipulator (paper III); see the module docstring.
 
@@ -561,16 +576,12 @@ class PushEnv(EnvBase, VecEnv):
     def set_object_mass_range(self, low: float, high: float) -> None:
         """Objects of episodes drawn from now on weigh U(``low``, ``high``) [kg], a sub-range of ``randomization.mass``
         (a training curriculum, ``policies/curriculum.py``)."""
-        configured = self.cfg.randomization.mass
-        if not configured[0] <= low <= high <= configured[1]:
-            raise ConfigError(f"object mass range must lie within randomization.mass {configured} kg with low <= high,"
-                              f" got ({low!r}, {high!r})")
-        self.object_mass_range.fill_(wp.vec2(low, high))
+        set_sub_range(self.object_mass_range, "object mass range", "randomization.mass", self.cfg.randomization.mass,
+                      "kg", low, high)
 
     @property
     def object_mass_range_value(self) -> tuple[float, float]:
-        low, high = self.object_mass_range.numpy()[0]
-        return float(low), float(high)
+        return range_value(self.object_mass_range)
 
     def set_success_angle(self, degrees: float) -> None:
         """From the next step on, an object within ``degrees`` of its goal's rotation (and within the success
@@ -589,16 +600,12 @@ class PushEnv(EnvBase, VecEnv):
     def set_goal_radius_range(self, low: float, high: float) -> None:
         """Goals of episodes drawn from now on lie ``low``-``high`` [m] from the object's start (uniform by area), a
         sub-range of ``sampling.goal_radius`` (a training curriculum, ``policies/curriculum.py``)."""
-        configured = self.cfg.sampling.goal_radius
-        if not configured[0] <= low <= high <= configured[1]:
-            raise ConfigError(f"goal radius range must lie within sampling.goal_radius {configured} m with low <= high,"
-                              f" got ({low!r}, {high!r})")
-        self.goal_radius_range.fill_(wp.vec2(low, high))
+        set_sub_range(self.goal_radius_range, "goal radius range", "sampling.goal_radius", self.cfg.sampling.goal_radius,
+                      "m", low, high)
 
     @property
     def goal_radius_range_value(self) -> tuple[float, float]:
-        low, high = self.goal_radius_range.numpy()[0]
-        return float(low), float(high)
+        return range_value(self.goal_radius_range)
 
     def set_near_goal_starts(self, share: float, radius: float, max_yaw: float) -> None:
         """Episodes drawn from now on start near their goal with probability ``share``: the goal uniform (by area)

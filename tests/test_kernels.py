@@ -492,15 +492,21 @@ def read_struct(cls, s):
     return {name: getattr(s, name).numpy() for name, var in cls.vars.items() if wp.types.is_array(var.type)}
 
 
+def curriculum_draws(n, **levels):
+    """The episodes ``sample_episodes`` draws for ``n`` worlds from the same random streams whatever the training
+    curriculum ``levels`` (its keyword arguments: difficulty, object_mass, goal_radius, behind)."""
+    _, task_np = random_state(np.random.default_rng(3), n)
+    task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(4), n))
+    sample_episodes(np.ones(n), 9, sampling_params(), task, spec, **levels)
+    return read_struct(sampling.EpisodeSpec, spec)
+
+
 def test_goal_difficulty_scales_the_goal_yaw_change():
     """Curriculum: at difficulty d the goal asks for d of the drawn yaw change; its position is unchanged."""
     n = 2000
     goals = {}
     for d in (1.0, 0.4, 0.0):
-        _, task_np = random_state(np.random.default_rng(3), n)  # identical random streams for every d
-        task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(4), n))
-        sample_episodes(np.ones(n), 9, sampling_params(), task, spec, difficulty=d)
-        out = read_struct(sampling.EpisodeSpec, spec)
+        out = curriculum_draws(n, difficulty=d)
         goals[d] = out["goal"]
         object_yaw = out["object_yaw"]
     wrap = lambda a: np.arctan2(np.sin(a), np.cos(a))  # noqa: E731
@@ -515,10 +521,7 @@ def test_object_mass_range_bounds_the_mass_and_nothing_else():
     n = 4000
     out = {}
     for mass in ((1.0, 10.0), (1.0, 2.5)):
-        _, task_np = random_state(np.random.default_rng(3), n)  # identical random streams for both ranges
-        task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(4), n))
-        sample_episodes(np.ones(n), 9, sampling_params(), task, spec, object_mass=mass)
-        out[mass] = read_struct(sampling.EpisodeSpec, spec)
+        out[mass] = curriculum_draws(n, object_mass=mass)
     light, full = out[(1.0, 2.5)], out[(1.0, 10.0)]
     assert light["mass"].min() >= 1.0 and light["mass"].max() <= 2.5
     assert_uniform((light["mass"] - 1.0) / 1.5, "mass in the narrowed range")
@@ -534,10 +537,7 @@ def test_goal_radius_range_moves_the_goal_along_its_bearing_and_nothing_else():
     n = 4000
     out = {}
     for radius in ((0.0, 2.0), (0.4, 0.6)):
-        _, task_np = random_state(np.random.default_rng(3), n)  # identical random streams for both ranges
-        task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(4), n))
-        sample_episodes(np.ones(n), 9, sampling_params(), task, spec, goal_radius=radius)
-        out[radius] = read_struct(sampling.EpisodeSpec, spec)
+        out[radius] = curriculum_draws(n, goal_radius=radius)
     near, full = out[(0.4, 0.6)]["goal"], out[(0.0, 2.0)]["goal"]
     r_near, r_full = np.linalg.norm(near[:, :2], axis=1), np.linalg.norm(full[:, :2], axis=1)
     assert r_near.min() >= 0.4 - 1e-5 and r_near.max() <= 0.6 + 1e-5
@@ -557,10 +557,7 @@ def test_behind_starts_put_the_robot_opposite_the_goal_facing_the_object():
     n, spread = 4000, 0.3
     out = {}
     for share in (0.0, 1.0, 0.5):
-        _, task_np = random_state(np.random.default_rng(3), n)  # identical random streams for every share
-        task, spec = make_struct(PushTask, **task_np), make_struct(sampling.EpisodeSpec, **random_spec(np.random.default_rng(4), n))
-        sample_episodes(np.ones(n), 9, sampling_params(), task, spec, behind=(share, spread))
-        out[share] = read_struct(sampling.EpisodeSpec, spec)
+        out[share] = curriculum_draws(n, behind=(share, spread))
     wrap = lambda a: np.arctan2(np.sin(a), np.cos(a))  # noqa: E731
     paper, behind = out[0.0], out[1.0]
     for name in paper:

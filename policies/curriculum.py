@@ -10,8 +10,8 @@ touches the object succeeds often, so the policy learns to stay away.
 
 Goal distance: the goals are first drawn from a band away from the success radius (``initial_radius``, 0.4-0.6 m,
 the sanity task's 0.5 m), which widens to the configured ``sampling.goal_radius`` (``PushEnv.set_goal_radius_range``):
-no goal of the band is reached by staying away, and on the sanity task goals 0-2 m away instead of 0.5 m slow
-learning about fourfold (docs/ppo_fine_tuning.md).
+no goal of the band is reached by staying away, and far goals are what slows learning most after the walk round the
+object (docs/ppo_fine_tuning.md).
 
 Object mass: the objects' masses are drawn from ``[m_low, m_high(d)]`` with ``m_high`` rising from ``initial_max`` to
 the configured ``randomization.mass`` maximum (``PushEnv.set_object_mass_range``). Our arm's PD joints yield

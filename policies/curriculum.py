@@ -5,8 +5,8 @@ Goal difficulty: episodes are drawn as in the paper, but the goal asks for only 
 one), and, with ``initial_success_angle_deg`` set, success tolerates a rotation from ``initial_success_angle_deg`` at 0
 down to the paper's 10 deg at 1 (``PushEnv.set_success_angle``): at level 0 a goal asking for no turn still needs
 the object pushed without turning it more than 10 deg, which a policy learning from scratch rarely manages
-(docs/ppo_fine_tuning.md). Scaling the goal *distance* toward 0 was tried and fails: at small distances a robot that never
-touches the object succeeds often, so the policy learns to stay away.
+(docs/ppo_fine_tuning.md). Scaling the goal *distance* toward 0 was tried and fails: at small distances a robot
+that never touches the object succeeds often, so the policy learns to stay away.
 
 Goal distance: the goals are first drawn from a band away from the success radius (``initial_radius``, 0.4-0.6 m,
 the sanity task's 0.5 m), which widens to the configured ``sampling.goal_radius`` (``PushEnv.set_goal_radius_range``):
@@ -35,7 +35,7 @@ facing it (``PushEnv.set_behind_starts``), where a push toward the goal is one w
 (a goal 0.5 m ahead, learnt from scratch within a few hundred iterations); from the paper's starts, anywhere around
 the object and facing anywhere, a policy must first learn to walk round it. On the sanity task a goal at a random
 bearing instead of straight ahead is what slows learning most (docs/ppo_fine_tuning.md), so the spread of these
-starts can follow the training success (a third :class:`SuccessGatedLevel`): from the aligned geometry to any
+starts can follow the training success (a :class:`SuccessGatedLevel` too): from the aligned geometry to any
 bearing and heading, which at full spread and share 1 are the paper's starts again.
 """
 

@@ -26,7 +26,8 @@ from rsl_rl.runners import OnPolicyRunner
 from dynpush.policies.cat_ppo import CaTPPO
 from dynpush.policies.checkpoint_file import CheckpointError, read_checkpoint
 from dynpush.policies.curriculum import (
-    BehindStartConfig, GoalCurriculumConfig, GoalDistanceCurriculumConfig, NearGoalStartConfig, ObjectMassCurriculumConfig,
+    BehindStartConfig, GoalCurriculumConfig, GoalDistanceCurriculumConfig, NearGoalStartConfig,
+    ObjectMassCurriculumConfig,
     SuccessGatedLevel,
 )
 from dynpush.policies.progress import ProgressLogger
@@ -235,7 +236,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             self.logger.run_state["/curriculum/object_mass_max"] = high
         if self.distance_curriculum.enabled:
             self.distance_difficulty = next_level(self.distance_curriculum, self.distance_difficulty)
-            low, high = self.distance_curriculum.radius_range(self.distance_difficulty, self.env.cfg.sampling.goal_radius)
+            configured = self.env.cfg.sampling.goal_radius
+            low, high = self.distance_curriculum.radius_range(self.distance_difficulty, configured)
             self.env.set_goal_radius_range(low, high)
             self.logger.run_state["/curriculum/goal_radius_max"] = high
         if self.behind_starts.enabled:

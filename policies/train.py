@@ -17,7 +17,8 @@ from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
 from dynpush.sim.config import ConfigError, PushEnvConfig
 
 from .curriculum import (
-    BehindStartConfig, GoalCurriculumConfig, GoalDistanceCurriculumConfig, NearGoalStartConfig, ObjectMassCurriculumConfig,
+    BehindStartConfig, GoalCurriculumConfig, GoalDistanceCurriculumConfig, NearGoalStartConfig,
+    ObjectMassCurriculumConfig,
 )
 from .expert_regularization import ExpertLabelledEnv
 from .fine_tune import MOVED_FIELDS, FineTuneConfig

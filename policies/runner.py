@@ -27,8 +27,7 @@ from dynpush.policies.cat_ppo import CaTPPO
 from dynpush.policies.checkpoint_file import CheckpointError, read_checkpoint
 from dynpush.policies.curriculum import (
     BehindStartConfig, GoalCurriculumConfig, GoalDistanceCurriculumConfig, NearGoalStartConfig,
-    ObjectMassCurriculumConfig,
-    SuccessGatedLevel,
+    ObjectMassCurriculumConfig, SuccessGatedLevel,
 )
 from dynpush.policies.progress import ProgressLogger
 from dynpush.policies.expert_regularization import ExpertImitationLoss

@@ -20,9 +20,9 @@ CaT terminates; on the sanity task (``benchmarks/ppo_sanity.py``) with the paper
 learning from scratch on 1-10 kg objects learns to keep away, while on 1-2 kg objects it learns to push
 (docs/ppo_fine_tuning.md).
 
-The levels follow the training success rate (:class:`SuccessGatedLevel`): after every iteration a level rises by
-``step`` when the success rate of the episodes that ended during it (over all processes) exceeds ``promote_above``,
-and falls by ``step`` below ``demote_below``. Evaluation and export never use them: an environment starts with the
+The levels follow the training success rate (:class:`SuccessGatedLevel`): once at least ``curriculum_window_episodes``
+training episodes have ended (over all processes) since the levels last moved, a level rises by ``step`` when their
+success rate exceeds ``promote_above`` and falls by ``step`` below ``demote_below``. Evaluation and export never use them: an environment starts with the
 paper's goals and the configured masses.
 
 Near-goal starts (a start-state or "reverse" curriculum, Florensa et al. 2017): a share of the training resets

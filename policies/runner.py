@@ -101,6 +101,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self.near_goal_starts = NearGoalStartConfig(**train_cfg.get("near_goal_starts", {}))
         self.behind_starts = BehindStartConfig(**train_cfg.get("behind_starts", {}))
         self.behind_difficulty = self.behind_starts.initial  # saved in checkpoints, as the mass level
+        self.curriculum_window_episodes = train_cfg.get("curriculum_window_episodes", 1)
+        self._episode_tally = torch.zeros(2, dtype=torch.float64)  # (ended, succeeded) since the levels last moved
         self.critic_warmup_iterations = train_cfg.get("critic_warmup_iterations", 0)
         self.critic_warmup_learning_rate = train_cfg.get("critic_warmup_learning_rate")
         self.learning_rate = self.alg.learning_rate  # the configured one, restored after the warm-up
@@ -244,12 +246,17 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             self.apply_behind_starts()
 
     def training_success_rate(self) -> float | None:
-        """Success rate of the training episodes that ended since the last call, over all processes (None: none)."""
+        """Success rate of the training episodes that ended, over all processes, since the last call that returned
+        one: None until at least ``curriculum_window_episodes`` have ended (the levels hold)."""
         counts = torch.tensor(self.env.take_episode_counts(), dtype=torch.float64)
         if self.is_distributed:
             torch.distributed.all_reduce(counts)
-        ended, succeeded = counts.tolist()
-        return succeeded / ended if ended else None
+        self._episode_tally += counts
+        ended, succeeded = self._episode_tally.tolist()
+        if ended < self.curriculum_window_episodes:
+            return None
+        self._episode_tally.zero_()
+        return succeeded / ended
 
     def apply_near_goal_starts(self) -> None:
         """Sets the training environment's near-goal starts (at every launch: a resumed run's environment starts with

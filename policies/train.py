@@ -61,7 +61,11 @@ class TrainConfig:
     # Training objects from light to the configured masses (ours, policies/curriculum.py); evaluation draws from
     # env.randomization.mass.
     mass_curriculum: ObjectMassCurriculumConfig = field(default_factory=ObjectMassCurriculumConfig)
+    # Goals first 0.4-0.6 m away, then as far as env.sampling.goal_radius (ours, policies/curriculum.py).
     distance_curriculum: GoalDistanceCurriculumConfig = field(default_factory=GoalDistanceCurriculumConfig)
+    # The success-gated curricula move on the success of at least this many ended training episodes (ours): 256
+    # worlds end about six 20 s episodes per iteration, too few to judge a level by.
+    curriculum_window_episodes: int = 100
     # Training resets that start near the goal with the yaw off (ours, policies/curriculum.py); evaluation never
     # uses them: the evaluation environment is built from ``env`` alone (policies/trained_env.py).
     near_goal_starts: NearGoalStartConfig = field(default_factory=NearGoalStartConfig)
@@ -121,7 +125,8 @@ class TrainConfig:
                 raise ConfigError(f"p_max_overrides[{name!r}] must be (initial, final) within [0, 1], got {pair!r}")
         self.ppo.validate()
         self.network.validate()
-        for name, low in (("eval_interval", 0), ("eval_episodes", 1), ("keep_checkpoints", 0)):
+        for name, low in (("eval_interval", 0), ("eval_episodes", 1), ("keep_checkpoints", 0),
+                          ("curriculum_window_episodes", 1)):
             if not isinstance(getattr(self, name), int) or getattr(self, name) < low:
                 raise ConfigError(f"{name} must be an integer >= {low}, got {getattr(self, name)!r}")
         return self
@@ -173,6 +178,7 @@ class TrainConfig:
             "curriculum": dataclasses.asdict(self.curriculum),
             "mass_curriculum": dataclasses.asdict(self.mass_curriculum),
             "distance_curriculum": dataclasses.asdict(self.distance_curriculum),
+            "curriculum_window_episodes": self.curriculum_window_episodes,
             "near_goal_starts": dataclasses.asdict(self.near_goal_starts),
             "behind_starts": dataclasses.asdict(self.behind_starts),
             "critic_warmup_iterations": self.fine_tune.critic_warmup_iterations,

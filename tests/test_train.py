@@ -190,6 +190,18 @@ def test_goal_curriculum_widens_the_success_angle_at_low_levels(tmp_path):
         runner.env.set_success_angle(5.0)
 
 
+def test_curricula_move_on_a_window_of_ended_episodes(tmp_path):
+    """The levels judge the success of at least ``curriculum_window_episodes`` ended episodes, summed over the
+    iterations since they last moved; until then they hold."""
+    runner = train(apply_overrides(tiny(1), ["curriculum_window_episodes=10"]), tmp_path / "run")
+    counts = iter([(4, 1), (4, 3), (4, 0), (0, 0), (12, 12)])
+    runner.env.take_episode_counts = lambda: next(counts)
+    rates = [runner.training_success_rate() for _ in range(5)]
+    assert rates[:2] == [None, None] and rates[2] == pytest.approx(4 / 12) and rates[3] is None and rates[4] == 1.0
+    with pytest.raises(ConfigError, match=r"^curriculum_window_episodes must be an integer >= 1, got 0$"):
+        apply_overrides(tiny(1), ["curriculum_window_episodes=0"]).validate()
+
+
 def test_near_goal_start_config_is_checked():
     from dynpush.policies.curriculum import NearGoalStartConfig
 

@@ -397,26 +397,36 @@ def test_compute_terminations():
     robot_np["body_q"][base, 2] = rng.uniform(0.1, 0.7, n)
     task_np["episode_step"] = rng.integers(max_steps - 3, max_steps, n)
     success0 = rng.integers(0, 2, n)
+    # Diverged worlds (a non-finite base or object pose or velocity): every eighth, one field each.
+    diverged = np.arange(n) % 8 == 5
+    for k, w in enumerate(np.flatnonzero(diverged)):
+        body, field, column = [(base[w], "body_q", 0), (obj[w], "body_q", 4), (base[w], "body_qd", 3),
+                               (obj[w], "body_qd", 1)][k % 4]
+        robot_np[field][body, column] = [np.nan, np.inf][k % 2]
+        success0[w] = 0  # a diverged world's success flag is 0 (its distances are NaN)
     params = terminations.TerminationParams()
     params.object_topple, params.base_tilt, params.base_min_height, params.max_episode_steps = 1.0, 1.2, 0.25, max_steps
     robot, task = structs(robot_np, task_np)
-    flags = [wp.zeros(n, dtype=int, device=DEVICE) for _ in range(4)]
+    flags = [wp.zeros(n, dtype=int, device=DEVICE) for _ in range(5)]
     launch(terminations.compute_terminations, n, robot, task, params, arr(success0, int), *flags)
-    reset, time_out, episode_success, toppled_out = (f.numpy() for f in flags)
+    reset, time_out, episode_success, toppled_out, diverged_out = (f.numpy() for f in flags)
 
     step = task_np["episode_step"] + 1
-    toppled = tilt(robot_np["body_q"][obj, 3:]) > 1.0
-    fallen = (tilt(robot_np["body_q"][base, 3:]) > 1.2) | (robot_np["body_q"][base, 2] < 0.25)
+    toppled = ~diverged & (tilt(robot_np["body_q"][obj, 3:]) > 1.0)
+    fallen = ~diverged & ((tilt(robot_np["body_q"][base, 3:]) > 1.2) | (robot_np["body_q"][base, 2] < 0.25))
     timed_out = step >= max_steps
-    done = toppled | fallen | timed_out
-    for label, mask in (("time-out only", timed_out & ~toppled & ~fallen), ("toppled at time-out", timed_out & toppled),
-                        ("fallen, not toppled", fallen & ~toppled), ("running", ~done)):
+    done = toppled | fallen | timed_out | diverged
+    for label, mask in (("time-out only", timed_out & ~toppled & ~fallen & ~diverged),
+                        ("toppled at time-out", timed_out & toppled), ("fallen, not toppled", fallen & ~toppled),
+                        ("diverged before the time-out", diverged & ~timed_out), ("running", ~done)):
         assert mask.any(), f"no world in case {label}"
     np.testing.assert_array_equal(task.episode_step.numpy(), step)
     np.testing.assert_array_equal(reset, done)
-    np.testing.assert_array_equal(time_out, timed_out & ~(toppled | fallen), err_msg="time-out only without a fall")
+    np.testing.assert_array_equal(time_out, timed_out & ~(toppled | fallen | diverged),
+                                  err_msg="time-out only without a fall or divergence")
     np.testing.assert_array_equal(episode_success, np.where(done, success0, -1))
     np.testing.assert_array_equal(toppled_out, done & toppled)
+    np.testing.assert_array_equal(diverged_out, diverged)
 
 
 # --------------------------------------------------------------------------- reset sampling (III-B, III-E)

@@ -194,3 +194,23 @@ def test_step_commands_is_step_on_the_mapped_actions(small_env):
     assert not obs["policy"][:, 43:54].any()
     with pytest.raises(ValueError, match="finite"):
         env.step_commands(np.full((4, 6), np.nan), arm_targets)
+
+
+def test_a_diverged_world_ends_its_episode_and_starts_afresh():
+    """A non-finite velocity in one world's object (a diverged solver) ends that world's episode as diverged, a
+    failure that is not a time-out, and its next episode starts from finite state: the observations stay finite
+    (rsl_rl stops a run on a NaN observation) and the other world runs on."""
+    env = PushEnv(PushEnvConfig(num_envs=2, seed=3))
+    env.reset()
+    env.step(torch.zeros(2, 11))
+    body_qd = env.state_0.body_qd.numpy()
+    body_qd[int(env.object_body.numpy()[1])] = np.nan
+    env.state_0.body_qd.assign(body_qd)
+    _, _, dones, extras = env.step(torch.zeros(2, 11))
+    assert dones.tolist() == [False, True] and not extras["time_outs"].any()
+    assert extras["log"]["/episode/diverged"].tolist() == [1.0]
+    assert extras["log"]["/episode/success"].tolist() == [0.0]
+    for _ in range(3):
+        obs, _, dones, _ = env.step(torch.zeros(2, 11))
+        assert not dones.any()
+    assert all(bool(torch.isfinite(obs[key]).all()) for key in obs.keys())

@@ -2,7 +2,9 @@
 
 The object has toppled when its +z axis tilts beyond ``object_topple``; the robot has fallen when
 its base tilts beyond ``base_tilt`` or drops below ``base_min_height`` (thresholds in
-``TerminationConfig``).
+``TerminationConfig``). A world whose base or object pose or velocity is not finite (the solver diverged) ends
+its episode too, as a failure: its next episode starts from a fresh state, where a NaN left in place would reach
+the observations and stop the whole run.
 """
 
 import warp as wp
@@ -31,19 +33,28 @@ def compute_terminations(
     time_out: wp.array(dtype=int),
     episode_success: wp.array(dtype=int),
     episode_toppled: wp.array(dtype=int),
+    episode_diverged: wp.array(dtype=int),
 ):
     """Advances the episode counter and flags worlds to reset; ``episode_*`` describe ended episodes.
 
-    ``episode_success`` is the success flag at an episode's last step (-1 where no episode ended).
+    ``episode_success`` is the success flag at an episode's last step (-1 where no episode ended);
+    ``episode_toppled`` and ``episode_diverged`` are 1 where an episode ended toppled or with the solver diverged.
     """
     w = wp.tid()
     task.episode_step[w] = task.episode_step[w] + 1
     x_b = robot.body_q[robot.base_body[w]]
-    toppled = tilt_angle(wp.transform_get_rotation(robot.body_q[robot.object_body[w]])) > params.object_topple
-    fallen = tilt_angle(wp.transform_get_rotation(x_b)) > params.base_tilt or wp.transform_get_translation(x_b)[2] < params.base_min_height
+    x_o = robot.body_q[robot.object_body[w]]
+    diverged = not (wp.isfinite(wp.transform_get_translation(x_b)) and wp.isfinite(wp.transform_get_rotation(x_b))
+                    and wp.isfinite(wp.transform_get_translation(x_o)) and wp.isfinite(wp.transform_get_rotation(x_o))
+                    and wp.isfinite(robot.body_qd[robot.base_body[w]]) and wp.isfinite(robot.body_qd[robot.object_body[w]]))
+    # A diverged world is neither toppled nor fallen: its angles are not numbers.
+    toppled = not diverged and tilt_angle(wp.transform_get_rotation(x_o)) > params.object_topple
+    fallen = not diverged and (tilt_angle(wp.transform_get_rotation(x_b)) > params.base_tilt
+                               or wp.transform_get_translation(x_b)[2] < params.base_min_height)
     timed_out = task.episode_step[w] >= params.max_episode_steps
-    done = toppled or fallen or timed_out
+    done = toppled or fallen or timed_out or diverged
     reset[w] = wp.where(done, 1, 0)
-    time_out[w] = wp.where(timed_out and not (toppled or fallen), 1, 0)
+    time_out[w] = wp.where(timed_out and not (toppled or fallen or diverged), 1, 0)
     episode_success[w] = wp.where(done, success[w], -1)
     episode_toppled[w] = wp.where(done and toppled, 1, 0)
+    episode_diverged[w] = wp.where(diverged, 1, 0)

@@ -44,9 +44,10 @@ def compute_terminations(
     task.episode_step[w] = task.episode_step[w] + 1
     x_b = robot.body_q[robot.base_body[w]]
     x_o = robot.body_q[robot.object_body[w]]
+    v_b, v_o = robot.body_qd[robot.base_body[w]], robot.body_qd[robot.object_body[w]]
     diverged = not (wp.isfinite(wp.transform_get_translation(x_b)) and wp.isfinite(wp.transform_get_rotation(x_b))
                     and wp.isfinite(wp.transform_get_translation(x_o)) and wp.isfinite(wp.transform_get_rotation(x_o))
-                    and wp.isfinite(robot.body_qd[robot.base_body[w]]) and wp.isfinite(robot.body_qd[robot.object_body[w]]))
+                    and wp.isfinite(v_b) and wp.isfinite(v_o))
     # A diverged world is neither toppled nor fallen: its angles are not numbers.
     toppled = not diverged and tilt_angle(wp.transform_get_rotation(x_o)) > params.object_topple
     fallen = not diverged and (tilt_angle(wp.transform_get_rotation(x_b)) > params.base_tilt

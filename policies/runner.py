@@ -215,8 +215,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
 
     def apply_curricula(self, fresh_run: bool) -> None:
         """Sets the goal difficulty (and success angle), the object mass range, the goal distance range and the spread
-        of the starts behind the object from the success rate of the episodes that ended since the last call, over all
-        processes (every process then draws its episodes at the same levels)."""
+        of the starts behind the object from :meth:`training_success_rate` (over all processes: every process then draws
+        its episodes at the same levels); the levels hold while it is None."""
         success_rate = self.training_success_rate()
 
         def next_level(cfg: SuccessGatedLevel, level: float) -> float:

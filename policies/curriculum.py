@@ -108,7 +108,7 @@ class ObjectMassCurriculumConfig(SuccessGatedLevel):
 
     def validate(self, prefix: str = "mass_curriculum", configured: tuple[float, float] = (1.0, 10.0)) -> None:
         super().validate(prefix)
-        if not configured[0] <= self.initial_max <= configured[1]:
+        if self.enabled and not configured[0] <= self.initial_max <= configured[1]:
             raise ConfigError(f"{prefix}.initial_max must lie in env.randomization.mass {tuple(configured)} kg,"
                               f" got {self.initial_max!r}")
 
@@ -128,7 +128,7 @@ class GoalDistanceCurriculumConfig(SuccessGatedLevel):
     def validate(self, prefix: str = "distance_curriculum", configured: tuple[float, float] = (0.0, 2.0)) -> None:
         super().validate(prefix)
         low, high = self.initial_radius
-        if not configured[0] <= low <= high <= configured[1]:
+        if not low <= high or self.enabled and not configured[0] <= low <= high <= configured[1]:
             raise ConfigError(f"{prefix}.initial_radius must be (low, high) with low <= high within"
                               f" env.sampling.goal_radius {tuple(configured)} m, got {self.initial_radius!r}")
 

@@ -351,7 +351,7 @@ def test_mass_curriculum_maps_its_level_onto_the_configured_masses():
     assert cfg.mass_range(1.0, (1.0, 10.0)) == (1.0, 10.0)
     assert cfg.next_difficulty(0.5, 0.25) == pytest.approx(0.525)  # promoted above 0.2
     with pytest.raises(ConfigError, match=r"mass_curriculum.initial_max must lie in env.randomization.mass \(1.0, 10.0\)"):
-        apply_overrides(tiny(1), ["mass_curriculum.initial_max=0.5"]).validate()
+        apply_overrides(tiny(1), ["mass_curriculum.enabled=True", "mass_curriculum.initial_max=0.5"]).validate()
 
 
 def test_min_noise_std_is_a_floor_under_the_learnt_action_noise():
@@ -398,17 +398,25 @@ def test_distance_curriculum_moves_its_band_to_the_configured_goals_and_resumes_
     assert resumed.distance_difficulty == 0.5 and resumed.env.goal_radius_range_value == pytest.approx((0.25, 1.35))
 
 
-@pytest.mark.parametrize("override, message", [
-    ("distance_curriculum.initial_radius=(0.6, 0.4)", r"^distance_curriculum.initial_radius must be \(low, high\)"),
-    ("distance_curriculum.step=1.5", r"^distance_curriculum.step must lie in \[0, 1\], got 1.5$"),
-    ("curriculum.initial=-0.1", r"^curriculum.initial must lie in \[0, 1\], got -0.1$"),
-    ("curriculum.demote_below=0.5", r"^curriculum.demote_below must be <= curriculum.promote_above$"),
-    ("mass_curriculum.promote_above=1.5", r"^mass_curriculum.promote_above must lie in \[0, 1\], got 1.5$"),
-    ("mass_curriculum.initial_max=12.0", r"^mass_curriculum.initial_max must lie in env.randomization.mass"),
+@pytest.mark.parametrize("overrides, message", [
+    (["distance_curriculum.initial_radius=(0.6, 0.4)"], r"^distance_curriculum.initial_radius must be \(low, high\)"),
+    (["distance_curriculum.enabled=True", "env.sampling.goal_radius=(0.0, 0.5)"],
+     r"^distance_curriculum.initial_radius must be \(low, high\) with low <= high within env.sampling.goal_radius"),
+    (["distance_curriculum.step=1.5"], r"^distance_curriculum.step must lie in \[0, 1\], got 1.5$"),
+    (["curriculum.initial=-0.1"], r"^curriculum.initial must lie in \[0, 1\], got -0.1$"),
+    (["curriculum.demote_below=0.5"], r"^curriculum.demote_below must be <= curriculum.promote_above$"),
+    (["mass_curriculum.promote_above=1.5"], r"^mass_curriculum.promote_above must lie in \[0, 1\], got 1.5$"),
+    (["mass_curriculum.enabled=True", "mass_curriculum.initial_max=12.0"],
+     r"^mass_curriculum.initial_max must lie in env.randomization.mass"),
 ])
-def test_curriculum_config_errors_name_the_field(override, message):
+def test_curriculum_config_errors_name_the_field(overrides, message):
     with pytest.raises(ConfigError, match=message):
-        apply_overrides(tiny(1), [override]).validate()
+        apply_overrides(tiny(1), overrides).validate()
+
+
+def test_a_disabled_curriculum_accepts_any_task_ranges():
+    """A reduced task (the goal 0.4 m ahead, objects of one mass) with the curricula off: nothing to check."""
+    apply_overrides(tiny(1), ["env.sampling.goal_radius=(0.4, 0.4)", "env.randomization.mass=(1.0, 1.5)"]).validate()
 
 
 def test_mass_curriculum_run_starts_light_resumes_its_level_and_eval_envs_keep_the_masses(tmp_path):

@@ -22,8 +22,8 @@ learning from scratch on 1-10 kg objects learns to keep away, while on 1-2 kg ob
 
 The levels follow the training success rate (:class:`SuccessGatedLevel`): once at least ``curriculum_window_episodes``
 training episodes have ended (over all processes) since the levels last moved, a level rises by ``step`` when their
-success rate exceeds ``promote_above`` and falls by ``step`` below ``demote_below``. Evaluation and export never use them: an environment starts with the
-paper's goals and the configured masses.
+success rate exceeds ``promote_above`` and falls by ``step`` below ``demote_below``. Evaluation and export never
+use them: an environment starts with the paper's goals, starts and success angle and the configured masses.
 
 Near-goal starts (a start-state or "reverse" curriculum, Florensa et al. 2017): a share of the training resets
 draws the goal next to the object's start with the yaw off by a drawn angle (``PushEnv.set_near_goal_starts``),

@@ -107,8 +107,8 @@ class NetworkConfig:
     critic_hidden: tuple[int, ...] = (256, 128, 64)
     init_noise_std: float = 1.0
     # A floor under the action noise (ours; 0: none). CaT prices constraint violations that the noise itself causes
-    # (action-rate limits, most of all), and the action-rate reward pays for less noise, so a learnt std can shrink
-    # before the task is found (docs/ppo_fine_tuning.md); rsl_rl clamps the std parameter to it.
+    # (the arm's command and joint limits from the first iteration), so a learnt std can shrink before the task is
+    # found (docs/ppo_fine_tuning.md); rsl_rl clamps the std parameter to it.
     min_noise_std: float = 0.0
     # Whether the actor's observation normaliser keeps its statistics (ours). None: held in a run that starts from
     # another policy (--init-from), whose weights were fitted to those statistics; re-normalising the inputs under

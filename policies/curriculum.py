@@ -64,6 +64,10 @@ class SuccessGatedLevel:
         if self.demote_below > self.promote_above:
             raise ConfigError(f"{prefix}.demote_below must be <= {prefix}.promote_above")
 
+    def progress(self, difficulty: float) -> float:
+        """Where ``difficulty`` lies between ``initial`` (0) and the paper's task (1)."""
+        return 1.0 if self.initial >= 1.0 else (difficulty - self.initial) / (1.0 - self.initial)
+
     def next_difficulty(self, difficulty: float, success_rate: float | None) -> float:
         """The difficulty for the next iteration; unchanged when no episode ended."""
         if success_rate is None:

@@ -32,7 +32,9 @@ from dynpush.policies.curriculum import (
 from dynpush.policies.progress import ProgressLogger
 from dynpush.policies.expert_regularization import ExpertImitationLoss
 from dynpush.policies.run_folder import save_checkpoint
-from dynpush.policies.schedules import ScheduleConfig, disturbance_scale_at, imitation_weight_at, p_max_at, reach_weight_at
+from dynpush.policies.schedules import (
+    ScheduleConfig, disturbance_scale_at, imitation_weight_at, p_max_at, p_max_at_progress, reach_weight_at,
+)
 
 
 @dataclass
@@ -139,8 +141,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
                 if self.out_of_time(time_budget, evaluating):
                     raise TimeBudgetSpent
             iteration_start = time.time()
-            if any(level.enabled for level in (self.curriculum, self.mass_curriculum, self.distance_curriculum,
-                                               self.behind_starts)):
+            if any(cfg.enabled for cfg in self.success_gated_curricula()):
                 self.apply_curricula(fresh_run=it == 0)
             self._snapshot = {"iteration": it, **copy.deepcopy(self.training_state(next_iteration=it))}
             if evaluating:  # after the snapshot: an interrupted evaluation loses no iteration
@@ -201,7 +202,12 @@ class CaTOnPolicyRunner(OnPolicyRunner):
     def apply_schedules(self, iteration: int, total_iterations: int) -> None:
         """Set ``p_max``, the reach-reward weight, the imitation weight and the disturbance scale for ``iteration``
         of a run of ``total_iterations``."""
-        self.alg.set_p_max(p_max_at(iteration, total_iterations, self.schedule_cfg, self.env.constraint_groups))
+        if self.schedule_cfg.constraints.follow_curricula:
+            progress = self.curricula_progress()
+            self.alg.set_p_max(p_max_at_progress(progress, self.schedule_cfg, self.env.constraint_groups))
+            self.logger.run_state["/curriculum/p_max_progress"] = progress
+        else:
+            self.alg.set_p_max(p_max_at(iteration, total_iterations, self.schedule_cfg, self.env.constraint_groups))
         if self.schedule_cfg.reach is not None:
             self.env.set_reward_weight("reach", reach_weight_at(iteration, total_iterations, self.schedule_cfg))
         if isinstance(self.alg.symmetry, ExpertImitationLoss):
@@ -244,6 +250,19 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         if self.behind_starts.enabled:
             self.behind_difficulty = next_level(self.behind_starts, self.behind_difficulty)
             self.apply_behind_starts()
+
+    def success_gated_curricula(self) -> tuple[SuccessGatedLevel, ...]:
+        """The configurations of the success-gated curricula: goal, mass, distance, spread of the starts."""
+        return self.curriculum, self.mass_curriculum, self.distance_curriculum, self.behind_starts
+
+    def curricula_progress(self) -> float:
+        """Mean progress of the enabled success-gated curricula from their initial levels (0) to the paper's task (1)."""
+        levels = (self.env.goal_difficulty_value if self.curriculum.enabled else 0.0, self.mass_difficulty,
+                  self.distance_difficulty, self.behind_difficulty)
+        enabled = [cfg.progress(level) for cfg, level in zip(self.success_gated_curricula(), levels) if cfg.enabled]
+        if not enabled:
+            raise ValueError("p_max follows the curricula, but none is enabled")
+        return sum(enabled) / len(enabled)
 
     def training_success_rate(self) -> float | None:
         """Success rate of the training episodes that ended, over all processes, since the last call that returned

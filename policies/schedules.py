@@ -45,6 +45,11 @@ class ConstraintCurriculumConfig:
     ramp_iterations: int = 12000
     """Iterations over which ``p_max`` rises from initial to final, in paper iterations (Table: 0 -> 12e3)."""
 
+    follow_curricula: bool = False
+    """True (ours): ``p_max`` rises with the training curricula's mean level instead of the iteration count, from
+    initial at their easiest levels to final at the paper's task, and falls back when they are demoted. From scratch,
+    CaT at the paper's initial values keeps the robot from pushing at all (docs/ppo_fine_tuning.md)."""
+
 
 @dataclass
 class ReachWeightConfig:
@@ -140,7 +145,16 @@ def p_max_at(
     """
     cfg = cfg or ScheduleConfig()
     ramp = scaled_iterations(cfg.constraints.ramp_iterations, total_iterations, cfg)
-    progress = min(max(iteration / ramp, 0.0), 1.0) if ramp > 0 else 1.0
+    return p_max_at_progress(iteration / ramp if ramp > 0 else 1.0, cfg, groups)
+
+
+def p_max_at_progress(
+    progress: float, cfg: ScheduleConfig | None = None, groups: Sequence[tuple[str, int]] = CONSTRAINT_GROUPS,
+) -> torch.Tensor:
+    """Per-column maximum termination probability at ``progress`` (clipped to [0, 1]) from each group's initial to its
+    final value; the shape is that of :func:`p_max_at`."""
+    cfg = cfg or ScheduleConfig()
+    progress = min(max(progress, 0.0), 1.0)
     values = []
     for name, dim in groups:
         initial, final = cfg.constraints.p_max[name]

@@ -57,6 +57,9 @@ class TrainConfig:
     # e.g. {'collision': (0.1, 1.0)}. With disabled_constraint_groups, the run's CaT curriculum
     # (runner_cfg()["schedule"]["constraints"]); runs from scratch set it too (configs/recipes/long_run.txt).
     p_max_overrides: dict[str, tuple[float, float]] = field(default_factory=dict)
+    # True: p_max goes from initial to final with the success-gated curricula's mean level, not the iteration count
+    # (ours, policies/schedules.py); needs at least one curriculum enabled.
+    p_max_follows_curricula: bool = False
     curriculum: GoalCurriculumConfig = field(default_factory=GoalCurriculumConfig)
     # Training objects from light to the configured masses (ours, policies/curriculum.py); evaluation draws from
     # env.randomization.mass.
@@ -123,6 +126,11 @@ class TrainConfig:
         for name, pair in self.p_max_overrides.items():
             if len(pair) != 2 or not all(0.0 <= p <= 1.0 for p in pair):
                 raise ConfigError(f"p_max_overrides[{name!r}] must be (initial, final) within [0, 1], got {pair!r}")
+        if self.p_max_follows_curricula and not any(
+                level.enabled for level in (self.curriculum, self.mass_curriculum, self.distance_curriculum,
+                                            self.behind_starts)):
+            raise ConfigError("p_max_follows_curricula needs an enabled curriculum (curriculum, mass_curriculum,"
+                              " distance_curriculum or behind_starts .enabled=True)")
         self.ppo.validate()
         self.network.validate()
         for name, low in (("eval_interval", 0), ("eval_episodes", 1), ("keep_checkpoints", 0),
@@ -173,7 +181,8 @@ class TrainConfig:
                 "scale_with_run_length": self.scale_schedules_with_run_length,
                 "constraints": {"p_max": {**ConstraintCurriculumConfig().p_max,
                                           **{name: tuple(pair) for name, pair in self.p_max_overrides.items()},
-                                          **{name: (0.0, 0.0) for name in self.disabled_constraint_groups}}},
+                                          **{name: (0.0, 0.0) for name in self.disabled_constraint_groups}},
+                                "follow_curricula": self.p_max_follows_curricula},
             },
             "curriculum": dataclasses.asdict(self.curriculum),
             "mass_curriculum": dataclasses.asdict(self.mass_curriculum),

@@ -89,13 +89,16 @@ def test_recipe_errors_are_one_line(tmp_path, capsys, monkeypatch, command, argv
 
 
 def test_the_curricula_recipe_is_the_long_run_with_every_curriculum_and_cat_from_zero():
-    """The curricula recipe differs from the long run's in its curricula and CaT's initial p_max only."""
+    """The curricula recipe differs from the long run's in its curricula and CaT's p_max curriculum only: from 0, with
+    the curricula's level."""
     long_run = config_of(read_recipe(RECIPES / "long_run.txt"))
     curricula = config_of(read_recipe(RECIPES / "curricula_from_scratch.txt"))
     TrainConfig.from_dict(curricula).validate()
     changed = {key for key in curricula if curricula[key] != long_run[key]}
-    assert changed == {"curriculum", "distance_curriculum", "mass_curriculum", "behind_starts", "p_max_overrides"}
+    assert changed == {"curriculum", "distance_curriculum", "mass_curriculum", "behind_starts", "p_max_overrides",
+                       "p_max_follows_curricula"}
     assert all(curricula[key]["enabled"] for key in ("curriculum", "distance_curriculum", "mass_curriculum",
                                                      "behind_starts"))
     assert curricula["behind_starts"]["share"] == 1.0
     assert all(initial == 0.0 for initial, _ in curricula["p_max_overrides"].values())
+    assert curricula["p_max_follows_curricula"] is True

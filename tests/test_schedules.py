@@ -6,7 +6,7 @@ import torch
 
 from dynpush.policies.locomotion_train import LocomotionTrainConfig
 from dynpush.policies.schedules import (CONSTRAINT_GROUPS, DisturbanceRampConfig, ScheduleConfig, disturbance_scale_at,
-                                        p_max_at, reach_weight_at)
+                                        p_max_at, p_max_at_progress, reach_weight_at)
 from dynpush.sim.config import ConfigError
 
 torch.set_num_threads(1)
@@ -57,6 +57,13 @@ def test_paper_run_endpoints_and_midpoints():
     for it in (0, 6000, 20000):  # no curriculum for collisions and object balance
         assert torch.all(_group(p_max_at(it, total), "collision") == 1.0)
         assert torch.all(_group(p_max_at(it, total), "object_balance") == 0.25)
+
+
+def test_p_max_at_progress_goes_from_initial_to_final_and_clips():
+    for progress in (0.0, 0.3, 1.0):
+        torch.testing.assert_close(p_max_at_progress(progress), _expected(progress))
+    torch.testing.assert_close(p_max_at_progress(-0.5), _expected(0.0))
+    torch.testing.assert_close(p_max_at_progress(1.5), _expected(1.0))
 
 
 def test_short_run_scales_with_length():

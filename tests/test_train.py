@@ -398,6 +398,27 @@ def test_distance_curriculum_moves_its_band_to_the_configured_goals_and_resumes_
     assert resumed.distance_difficulty == 0.5 and resumed.env.goal_radius_range_value == pytest.approx((0.25, 1.35))
 
 
+def test_p_max_follows_the_curricula_mean_level(tmp_path):
+    """With ``p_max_follows_curricula`` CaT's p_max sits at the mean progress of the enabled curricula from their initial
+    levels to the paper's task, whatever the iteration; without an enabled curriculum the config is refused."""
+    from dynpush.policies.schedules import p_max_at_progress
+
+    with pytest.raises(ConfigError, match=r"^p_max_follows_curricula needs an enabled curriculum"):
+        apply_overrides(tiny(1), ["p_max_follows_curricula=True"]).validate()
+    overrides = ["p_max_follows_curricula=True", "mass_curriculum.enabled=True", "mass_curriculum.initial=0.5",
+                 "distance_curriculum.enabled=True", "p_max_overrides={'collision': (0.0, 1.0)}"]
+    runner = train(apply_overrides(tiny(2), overrides), tmp_path / "run")
+    assert runner.curricula_progress() == pytest.approx(0.0)  # both at their initial levels: CaT at its initial p_max
+    torch.testing.assert_close(runner.alg.p_max, p_max_at_progress(0.0, runner.schedule_cfg))
+    runner.mass_difficulty, runner.distance_difficulty = 0.75, 0.8  # progress 0.5 and 0.8
+    runner.apply_schedules(iteration=1, total_iterations=2)
+    expected = p_max_at_progress(0.65, runner.schedule_cfg)
+    torch.testing.assert_close(runner.alg.p_max, expected)
+    assert not torch.equal(expected, p_max_at_progress(0.0, runner.schedule_cfg))
+    rows = [json.loads(line) for line in (tmp_path / "run" / "progress.jsonl").read_text().splitlines()]
+    assert [row["/curriculum/p_max_progress"] for row in rows] == [0.0, 0.0]
+
+
 @pytest.mark.parametrize("overrides, message", [
     (["distance_curriculum.initial_radius=(0.6, 0.4)"], r"^distance_curriculum.initial_radius must be \(low, high\)"),
     (["distance_curriculum.enabled=True", "env.sampling.goal_radius=(0.0, 0.5)"],

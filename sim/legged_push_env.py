@@ -11,8 +11,8 @@ One control step is two captured graphs around the locomotion network (onnxrunti
 call): (1) push actions -> base command and arm targets (or those commands given: ``step_commands``), and
 the locomotion observation of every world; (2) leg actions -> leg targets, physics, then the push task's
 rewards, constraints, terminations, resets and observations. Without a locomotion policy
-(``legged.locomotion_policy = ""``) the leg targets come from :meth:`LeggedPushEnv.set_leg_targets`
-(sim-to-sim: the runtime runs the locomotion ONNX).
+(``legged.locomotion_policy = ""``) the leg targets are given, as they are, by :meth:`LeggedPushEnv.set_leg_targets`
+(sim-to-sim: the runtime runs the locomotion ONNX and maps its actions to targets).
 """
 
 from __future__ import annotations
@@ -24,7 +24,6 @@ import numpy as np
 import torch
 import warp as wp
 
-from dynpush.assets_usd import LEG_JOINT_NAMES
 from dynpush.kernels.locomotion import (
     actions as loco_actions,
     constraints as loco_constraints,
@@ -33,7 +32,6 @@ from dynpush.kernels.locomotion import (
     views as loco_views,
 )
 from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
-from dynpush.runtime.actions import ActionScaling
 from dynpush.runtime.locomotion_contract import LocomotionContract
 
 from .push_env import PushEnv
@@ -106,12 +104,14 @@ class LeggedPushEnv(PushEnv):
         self.leg_obs = wp.zeros((n, loco_observations.NUM_POLICY_OBS), dtype=float)
         self.leg_critic_obs = wp.zeros((n, loco_observations.NUM_CRITIC_OBS), dtype=float)
         self.leg_actions_t = wp.to_torch(self.leg_actions)
+        # The leg targets [rad] of set_leg_targets, when no locomotion policy runs here; the legs' defaults at first.
+        self.leg_targets = wp.array(np.tile(self.scene.robot.legged.leg_default, (n, 1)).astype(np.float32), dtype=float)
 
     def _make_params(self) -> None:
         super()._make_params()
         legs = self.scene.robot.legged
         f32 = lambda a: wp.array(np.asarray(a, dtype=np.float32), dtype=float)  # noqa: E731
-        action_scale = 0.5  # external leg targets (set_leg_targets) pass through any scale unchanged
+        action_scale = 0.0  # no leg actions without a locomotion policy: the leg targets are given (set_leg_targets)
         if self.locomotion is not None:
             contract = self.locomotion.contract
             if not np.allclose(contract.default_joint_positions, legs.leg_default, atol=1e-5):
@@ -120,11 +120,10 @@ class LeggedPushEnv(PushEnv):
                                  f" {legs.leg_default.tolist()}")
             action_scale = contract.action_scale
         # Leg actions -> leg targets [rad]: the parameters of process_leg_actions.
-        self.leg_scaling = ActionScaling(legs.leg_default, action_scale)
         p = loco_views.LocomotionParams()
-        p.leg_default = f32(self.leg_scaling.default)
+        p.leg_default = f32(legs.leg_default)
         p.arm_default = f32(self.scene.robot.arm_default)
-        p.action_scale, p.clip = float(self.leg_scaling.scale), self.cfg.actions.clip
+        p.action_scale, p.clip = float(action_scale), self.cfg.actions.clip
         self.leg_params = p
         lim = loco_views.LeggedLimits()
         lim.stiffness, lim.damping, lim.effort_limit = f32(legs.leg_stiffness), f32(legs.leg_damping), f32(legs.leg_effort_limit)
@@ -148,8 +147,12 @@ class LeggedPushEnv(PushEnv):
     def _capture(self) -> None:
         self._graph_actions = self._capture_front(self._process_actions)
         with wp.ScopedCapture() as capture:
-            self._launch(loco_actions.process_leg_actions, [self.leg_actions, self.leg_params, self.leg_view,
-                                                            self.leg_task, self.control.joint_target_q])
+            if self.locomotion is not None:
+                self._launch(loco_actions.process_leg_actions, [self.leg_actions, self.leg_params, self.leg_view,
+                                                                self.leg_task, self.control.joint_target_q])
+            else:
+                self._launch(loco_actions.write_leg_targets, [self.leg_targets, self.leg_view, self.leg_task,
+                                                              self.control.joint_target_q])
             self._physics_and_task()
         self._graph = capture.graph
 
@@ -177,23 +180,14 @@ class LeggedPushEnv(PushEnv):
 
     def set_leg_targets(self, targets: np.ndarray) -> None:
         """Leg joint targets [rad] (num_envs, 12, ``LEG_JOINT_NAMES`` order) for the next steps, when no locomotion
-        policy runs inside the environment (they are applied as the actions of the locomotion contract). A target
-        beyond what those actions reach, the joint's default +- action scale x ``actions.clip``, is a ValueError
-        naming the joint, rather than clipped."""
+        policy runs inside the environment: they go to the legs' PD drives as given (the runtime that computed them
+        has applied the locomotion contract's action mapping and checked them)."""
         if self.locomotion is not None:
             raise RuntimeError("set_leg_targets: this environment runs its own locomotion policy")
         targets = np.asarray(targets, dtype=np.float32)
         if targets.shape != (self.num_envs, loco_views.NUM_LEG_JOINTS) or not np.all(np.isfinite(targets)):
             raise ValueError(f"leg targets must be finite with shape ({self.num_envs}, 12), got {targets.shape}")
-        actions = self.leg_scaling.actions(targets)
-        outside = np.argwhere(np.abs(actions) > self.cfg.actions.clip)
-        if len(outside):
-            world, joint = outside[0]
-            reach = float(self.leg_scaling.scale) * self.cfg.actions.clip
-            default = self.leg_scaling.default[joint]
-            raise ValueError(f"leg target of {LEG_JOINT_NAMES[joint]} (world {world}) must lie in"
-                             f" [{default - reach:.3f}, {default + reach:.3f}] rad, got {targets[world, joint]:.3f}")
-        self.leg_actions.assign(actions)
+        self.leg_targets.assign(targets)
 
     def _launch_step(self, front: wp.Graph | None = None) -> None:
         """The actions graph (or ``front``), the locomotion network on the leg observations (if it runs here), the

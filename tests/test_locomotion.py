@@ -360,19 +360,24 @@ def test_locomotion_train_config_errors_name_the_field(override, message):
         apply_overrides(LocomotionTrainConfig.preset_config("cpu"), [override]).validate()
 
 
-def test_leg_targets_beyond_the_leg_actions_reach_are_refused():
-    """External leg targets (sim-to-sim) are applied as leg actions clipped at ``actions.clip``: a target beyond
-    default +- 0.5 x 10 rad is refused with the joint's name instead of clipped; the joint limits lie within."""
+def test_given_leg_targets_reach_the_drives_as_given():
+    """External leg targets (sim-to-sim: the runtime runs the locomotion policy) go to the legs' joint drives exactly,
+    beyond any leg action's reach too (nothing maps them back into actions and clips them); a wrong shape or a
+    non-finite target is refused."""
     env = make_push_env(PushEnvConfig(num_envs=2, legged=LeggedModeConfig(enabled=True)))
     legs = env.scene.robot.legged
-    low, high = legs.leg_default - 5.0, legs.leg_default + 5.0
-    assert (low <= legs.leg_lower).all() and (legs.leg_upper <= high).all()
-    targets = np.tile(legs.leg_upper, (2, 1))
+    drives = lambda: env.control.joint_target_q.numpy()[env.scene.leg_q]  # noqa: E731
+    env.reset(randomize_episode_step=False)
+    env.step(torch.zeros(2, env.num_actions))
+    np.testing.assert_array_equal(drives(), np.tile(legs.leg_default, (2, 1)).astype(np.float32))
+    targets = np.stack([legs.leg_upper, legs.leg_default + 6.0]).astype(np.float32)
     env.set_leg_targets(targets)
-    targets[1, 4] = high[4] + 0.1
-    with pytest.raises(ValueError, match=rf"^leg target of {LEG_JOINT_NAMES[4]} \(world 1\) must lie in"
-                                         rf" \[{low[4]:.3f}, {high[4]:.3f}\] rad, got {targets[1, 4]:.3f}$"):
-        env.set_leg_targets(targets)
+    env.step(torch.zeros(2, env.num_actions))
+    np.testing.assert_array_equal(drives(), targets)
+    np.testing.assert_array_equal(env.leg_task.leg_target.numpy(), targets)
+    for bad in (np.zeros((1, 12)), np.where(np.eye(2, 12) > 0, np.nan, targets)):
+        with pytest.raises(ValueError, match=r"^leg targets must be finite with shape \(2, 12\)"):
+            env.set_leg_targets(bad)
 
 
 def test_objects_left_alone_stand_still_beside_stamping_legged_robots():

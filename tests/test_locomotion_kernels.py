@@ -151,6 +151,23 @@ def test_process_leg_actions_and_arm_targets():
     close(joint_target_q.numpy(), expected, rtol=1e-6, atol=1e-6, err_msg="leg/arm targets at their joint_q, rest untouched")
 
 
+def test_write_leg_targets_passes_them_as_given():
+    rng = np.random.default_rng(2)
+    n = 64
+    view_np, task_np = random_scene(rng, n)
+    targets = (5.0 * rng.normal(size=(n, 12))).astype(np.float32)  # beyond any action's reach: nothing is clipped
+    target0 = rng.normal(size=n * NQ).astype(np.float32)
+    view, task = structs(view_np, task_np)
+    joint_target_q = arr(target0)
+    launch(actions_k.write_leg_targets, n, arr(targets), view, task, joint_target_q)
+    expected = target0.copy()
+    expected[view_np["leg_q"]] = targets
+    close(joint_target_q.numpy(), expected, atol=0, err_msg="leg targets at their joint_q exactly, the rest untouched")
+    close(task.leg_target.numpy(), targets, atol=0)
+    close(task.actions.numpy(), task_np["actions"], atol=0, err_msg="the action history is not this kernel's")
+    close(task.last_actions.numpy(), task_np["last_actions"], atol=0)
+
+
 # --------------------------------------------------------------------------- feet
 def test_write_ee_force():
     """The heading-frame end-effector force turned by the base's yaw, as a wrench about the ee link's centre of mass

@@ -36,6 +36,21 @@ def process_leg_actions(
 
 
 @wp.kernel
+def write_leg_targets(
+    leg_targets: wp.array2d(dtype=float),
+    view: LeggedView,
+    task: LocomotionTask,
+    joint_target_q: wp.array(dtype=float),
+):
+    """Writes leg joint targets [rad] given from outside (a locomotion controller that runs elsewhere, sim-to-sim) as
+    they are; the action history is left alone: that controller keeps its own."""
+    w = wp.tid()
+    for j in range(NUM_LEG_JOINTS):
+        task.leg_target[w, j] = leg_targets[w, j]
+        joint_target_q[view.leg_q[w, j]] = leg_targets[w, j]
+
+
+@wp.kernel
 def write_arm_targets(view: LeggedView, task: LocomotionTask, joint_target_q: wp.array(dtype=float)):
     """The random arm motion's targets (all 6 arm joints) into the joint drives."""
     w = wp.tid()

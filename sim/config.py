@@ -93,8 +93,17 @@ class RandomizationConfig:
         check_positive(f"{prefix}.arm_joint_noise", self.arm_joint_noise, allow_zero=True)
 
 
+class NoiseHalfWidths:
+    """The validation of both tasks' observation-noise configs: every field but ``enabled`` is a half-width >= 0."""
+
+    def validate(self, prefix: str = "noise") -> None:
+        for f in dataclasses.fields(self):
+            if f.name != "enabled":
+                check_positive(f"{prefix}.{f.name}", getattr(self, f.name), allow_zero=True)
+
+
 @dataclass
-class ObservationNoiseConfig:
+class ObservationNoiseConfig(NoiseHalfWidths):
     """Half-widths of the actor's additive uniform noise (paper Table "Observations").
 
     Field names are the observation terms of ``dynpush.kernels.push.observations.POLICY_TERMS``.
@@ -110,11 +119,6 @@ class ObservationNoiseConfig:
     object_to_goal_b: float = 0.02
     goal_rotation_o: float = 0.01
     enabled: bool = True
-
-    def validate(self, prefix: str = "noise") -> None:
-        for f in dataclasses.fields(self):
-            if f.name != "enabled":
-                check_positive(f"{prefix}.{f.name}", getattr(self, f.name), allow_zero=True)
 
 
 @dataclass

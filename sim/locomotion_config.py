@@ -14,7 +14,10 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from .config import ConfigError, ConstraintConfig, MuJoCoConfig, RandomizationConfig, check_positive, check_range, validate_env
+from .config import (
+    ConfigError, ConstraintConfig, MuJoCoConfig, NoiseHalfWidths, RandomizationConfig, check_positive, check_range,
+    validate_env,
+)
 
 _PUSH_CONSTRAINTS = ConstraintConfig()
 _PUSH_RANDOMIZATION = RandomizationConfig()
@@ -145,7 +148,7 @@ class LocomotionConstraintConfig:
 
 
 @dataclass
-class LocomotionNoiseConfig:
+class LocomotionNoiseConfig(NoiseHalfWidths):
     """Half-widths of the actor's additive uniform observation noise (legged_gym's, scale 1; ours for the arm
     as the push task's). Field names are the terms of ``dynpush.kernels.locomotion.observations.POLICY_TERMS``; the
     command and the last actions are noise-free."""
@@ -158,11 +161,6 @@ class LocomotionNoiseConfig:
     arm_joint_position: float = 0.01
     arm_joint_velocity: float = 0.5
     enabled: bool = True
-
-    def validate(self, prefix: str = "noise") -> None:
-        for f in dataclasses.fields(self):
-            if f.name != "enabled":
-                check_positive(f"{prefix}.{f.name}", getattr(self, f.name), allow_zero=True)
 
     def half_width(self, term: str) -> float:
         return getattr(self, term, 0.0)

@@ -226,6 +226,7 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     behind_spread = series("/curriculum/behind_spread")
     goal_radius_max = series("/curriculum/goal_radius_max")
     success_angle = series("/curriculum/success_angle_deg")
+    p_max_progress = series("/curriculum/p_max_progress")
     evaluations = read_evaluations(run_dir)
     rows = (4 if records else 1) + (2 if evaluations else 0)  # a DAgger-only run: rates only
     fig = Figure(figsize=(8.0, (9.5 if records else 3.5) + (4.5 if evaluations else 0.0)), layout="constrained")
@@ -250,6 +251,9 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
     if np.isfinite(behind_spread).any():
         ax_rate.plot(hours, 100.0 * behind_spread / np.pi, color="tab:blue", ls="--",
                      label="starts behind the object: spread [% of pi]")
+    if np.isfinite(p_max_progress).any():
+        ax_rate.plot(hours, 100.0 * p_max_progress, color="k", ls="--",
+                     label="CaT p_max [% of the way from initial to final values]")
     if rounds:
         ax_rate.plot(round_hours, [100.0 * r["success_rate"] for r in rounds], "o-", color="tab:green", ms=3, alpha=0.6,
                      label="DAgger round: success (noisy rollouts, expert share 0.5^round)")

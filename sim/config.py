@@ -304,11 +304,11 @@ class LeggedModeConfig:
     # Newton's collision pipeline generates the contacts here (robot and object), up to sim.contacts_per_world per
     # world, and MuJoCo drops without an error what exceeds its buffers. With the locomotion task's 24 / 64 the
     # object lost its ground contacts whenever the legs moved: 29.7 % of 64 episodes "toppled" with no robot near,
-    # 0.0 % with 64 / 256 (Dec 2026). Each contact takes 4 constraint rows (pyramidal friction cone).
+    # 0.0 % with 64 / 256. Each contact takes 4 constraint rows (pyramidal friction cone).
     # The locomotion task's 5 CG (and line-search) iterations do not converge the object's contacts beside a walking
     # robot: objects no robot part touched rose and tipped over (15 of 35 toppled objects in 128 episodes of a push
     # policy on the legs; tests/test_locomotion.py). Same 256 episodes with 5 / 15 (line search 5) / 30 iterations:
-    # 27.3 / 16.0 / 12.1 % toppled, 0.79 / 0.97 / 1.26 s per 1000 world-steps (Dec 2026).
+    # 27.3 / 16.0 / 12.1 % toppled, 0.79 / 0.97 / 1.26 s per 1000 world-steps.
     mujoco: MuJoCoConfig = field(default_factory=lambda: MuJoCoConfig(iterations=30, ls_iterations=30, nconmax=64,
                                                                       njmax=256))
 
@@ -346,7 +346,7 @@ class PushEnvConfig:
 
     def validate(self) -> PushEnvConfig:
         validate_env(self)
-        # Runs saved before Dec 2026 carry the locomotion task's buffers in the legged section, unused while it is off.
+        # Older runs' configs carry the locomotion task's buffers in the legged section, unused while it is off.
         if self.legged.enabled and self.legged.mujoco.nconmax < self.sim.contacts_per_world:
             raise ConfigError(f"legged.mujoco.nconmax ({self.legged.mujoco.nconmax}) must be >= sim.contacts_per_world "
                               f"({self.sim.contacts_per_world}): MuJoCo would drop contacts that Newton generates")

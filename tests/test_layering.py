@@ -1,9 +1,10 @@
 """The import graph runs one way (issue 32).
 
 Layers, lowest first: ``assets_usd`` -> ``kernels`` -> ``sim`` -> ``policies`` -> ``dynpush`` (the CLI). A module
-may import its own layer or a lower one, never a higher one. ``runtime`` stands apart: it depends on numpy and
-onnxruntime only, never on kernels, sim or policies, nor on torch, warp or newton; the layers may take pure
-layout constants from its light modules (``kernels/push/observations.py`` reads ``runtime/observation.py``).
+may import its own layer or a lower one, never a higher one. ``runtime`` stands apart: besides the standard library
+it depends on numpy, onnxruntime, yaml and the motion-capture client only, never on kernels, sim or policies, nor on
+torch, warp or newton; the layers may take pure layout constants from its light modules
+(``kernels/push/observations.py`` reads ``runtime/observation.py``).
 No module imports a private (leading underscore) name from another module, and the imports that run form no cycle:
 neither those at module level nor those inside functions (a deferred import that closes a circle is a module-level
 one waiting for a caller; the shared code belongs in the lower module). Imports under ``if TYPE_CHECKING:`` never
@@ -41,6 +42,9 @@ BASE = {"dynpush", "dynpush.errors", "dynpush.shipped"}
 # ``__init__`` is standard library only; the USD generator next to it is not).
 RUNTIME_MAY_IMPORT = BASE | {"dynpush.assets_usd"}
 HEAVY = ("torch", "warp", "newton", "mujoco", "mujoco_warp", "rsl_rl", "tensordict", "pxr")
+# The third-party packages the runtime may import (an allow-list: what a robot's computer installs for it): arrays,
+# the ONNX session, its YAML config and the motion-capture client (imported only when that source is configured).
+RUNTIME_THIRD_PARTY = {"numpy", "onnxruntime", "yaml", "motioncapture"}
 
 # Known exceptions, each with the issue that removes it: (importer, imported). Empty when the layering holds.
 ALLOWED_UPWARD: set[tuple[str, str]] = set()
@@ -153,15 +157,22 @@ def test_runtime_stands_apart():
             continue
         for target, _, line in _imports(module, top_level_only=False):
             root = target.split(".")[0]
-            if root in HEAVY:
+            if target.startswith("dynpush"):
+                if _package_of(target) != "dynpush.runtime" and target not in RUNTIME_MAY_IMPORT:
+                    bad.append(f"{module}:{line} imports {target}")
+            elif root not in sys.stdlib_module_names and root not in RUNTIME_THIRD_PARTY:
                 bad.append(f"{module}:{line} imports {target}")
-            elif (
-                target.startswith("dynpush")
-                and _package_of(target) != "dynpush.runtime"
-                and target not in RUNTIME_MAY_IMPORT
-            ):
-                bad.append(f"{module}:{line} imports {target}")
-    assert not bad, "runtime/ must depend on numpy and onnxruntime only:\n" + "\n".join(bad)
+    assert not bad, (f"runtime/ may import the standard library, {sorted(RUNTIME_THIRD_PARTY)} and"
+                     f" {sorted(RUNTIME_MAY_IMPORT)} only:\n" + "\n".join(bad))
+
+
+def test_only_the_cli_imports_the_command_modules():
+    """Each package's ``commands.py`` (its argument parsers) belongs to the CLI layer: only ``dynpush.cli`` imports
+    them, so no library module depends on a parser."""
+    bad = [f"{module}:{line} imports {target}" for module in MODULES if module != "dynpush.cli"
+           for target, _, line in _imports(module, top_level_only=False)
+           if target.startswith("dynpush") and target.rsplit(".", 1)[-1] == "commands"]
+    assert not bad, "\n".join(bad)
 
 
 def _light_runtime_modules() -> set[str]:

@@ -13,6 +13,7 @@ boundary it also evaluates the actor when an evaluation is due (``evaluation``),
 from __future__ import annotations
 
 import copy
+import math
 import os
 import time
 from dataclasses import dataclass
@@ -105,6 +106,9 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self.behind_difficulty = self.behind_starts.initial  # saved in checkpoints, as the mass level
         self.curriculum_window_episodes = train_cfg.get("curriculum_window_episodes", 1)
         self._episode_tally = torch.zeros(2, dtype=torch.float64)  # (ended, succeeded) since the levels last moved
+        # Iterations of one full episode: the levels' success counts episodes ending at least that long after a move.
+        self.episode_iterations = math.ceil(env.max_episode_length / train_cfg["num_steps_per_env"])
+        self._count_episodes_from = 0  # the first iteration whose ended episodes count (a launch resets every world)
         self.critic_warmup_iterations = train_cfg.get("critic_warmup_iterations", 0)
         self.critic_warmup_learning_rate = train_cfg.get("critic_warmup_learning_rate")
         self.learning_rate = self.alg.learning_rate  # the configured one, restored after the warm-up
@@ -142,7 +146,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
                     raise TimeBudgetSpent
             iteration_start = time.time()
             if any(cfg.enabled for cfg in self.success_gated_curricula()):
-                self.apply_curricula(fresh_run=it == 0)
+                self.apply_curricula(it, fresh_run=it == 0)
             self._snapshot = {"iteration": it, **copy.deepcopy(self.training_state(next_iteration=it))}
             if evaluating:  # after the snapshot: an interrupted evaluation loses no iteration
                 seconds = self.evaluate(it)
@@ -219,11 +223,12 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             self.env.set_disturbance_scale(scale)
             self.logger.run_state["/curriculum/disturbance_scale"] = scale
 
-    def apply_curricula(self, fresh_run: bool) -> None:
+    def apply_curricula(self, iteration: int, fresh_run: bool) -> None:
         """Sets the goal difficulty (and success angle), the object mass range, the goal distance range and the spread
         of the starts behind the object from :meth:`training_success_rate` (over all processes: every process then draws
         its episodes at the same levels); the levels hold while it is None."""
-        success_rate = self.training_success_rate()
+        success_rate = self.training_success_rate(iteration)
+        before = self.curriculum_levels()
 
         def next_level(cfg: SuccessGatedLevel, level: float) -> float:
             return cfg.initial if fresh_run else cfg.next_difficulty(level, success_rate)
@@ -250,26 +255,38 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         if self.behind_starts.enabled:
             self.behind_difficulty = next_level(self.behind_starts, self.behind_difficulty)
             self.apply_behind_starts()
+        if self.curriculum_levels() != before:
+            # An episode ending within one episode length of the move may have started before it: the next judgement
+            # counts only episodes drawn at the new levels.
+            self._episode_tally.zero_()
+            self._count_episodes_from = iteration + self.episode_iterations
 
     def success_gated_curricula(self) -> tuple[SuccessGatedLevel, ...]:
         """The configurations of the success-gated curricula: goal, mass, distance, spread of the starts."""
         return self.curriculum, self.mass_curriculum, self.distance_curriculum, self.behind_starts
 
+    def curriculum_levels(self) -> tuple[float, float, float, float]:
+        """The levels of :meth:`success_gated_curricula`, in that order (the goal's 0 while it is off)."""
+        goal = self.env.goal_difficulty_value if self.curriculum.enabled else 0.0
+        return goal, self.mass_difficulty, self.distance_difficulty, self.behind_difficulty
+
     def curricula_progress(self) -> float:
         """Mean progress of the enabled success-gated curricula from their initial levels (0) to the paper's task (1)."""
-        levels = (self.env.goal_difficulty_value if self.curriculum.enabled else 0.0, self.mass_difficulty,
-                  self.distance_difficulty, self.behind_difficulty)
-        enabled = [cfg.progress(level) for cfg, level in zip(self.success_gated_curricula(), levels) if cfg.enabled]
+        enabled = [cfg.progress(level) for cfg, level in zip(self.success_gated_curricula(), self.curriculum_levels())
+                   if cfg.enabled]
         if not enabled:
             raise ValueError("p_max follows the curricula, but none is enabled")
         return sum(enabled) / len(enabled)
 
-    def training_success_rate(self) -> float | None:
+    def training_success_rate(self, iteration: int) -> float | None:
         """Success rate of the training episodes that ended, over all processes, since the last call that returned
-        one: None until at least ``curriculum_window_episodes`` have ended (the levels hold)."""
+        one: None until at least ``curriculum_window_episodes`` have ended (the levels hold). Episodes that end before
+        iteration ``_count_episodes_from`` (one episode length after the levels last moved) are not counted."""
         counts = torch.tensor(self.env.take_episode_counts(), dtype=torch.float64)
         if self.is_distributed:
             torch.distributed.all_reduce(counts)
+        if iteration < self._count_episodes_from:
+            return None
         self._episode_tally += counts
         ended, succeeded = self._episode_tally.tolist()
         if ended < self.curriculum_window_episodes:
@@ -300,7 +317,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         saved["iter"] = next_iteration
         saved["infos"] = {"env_state": self.env.state_dict(), "torch_rng": torch.get_rng_state(),
                           "mass_difficulty": self.mass_difficulty, "distance_difficulty": self.distance_difficulty,
-                          "behind_difficulty": self.behind_difficulty}
+                          "behind_difficulty": self.behind_difficulty, "curriculum_tally": self._episode_tally.tolist(),
+                          "count_episodes_from": self._count_episodes_from}
         return saved
 
     def save(self, path: str, infos: dict | None = None) -> None:
@@ -358,4 +376,6 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self.mass_difficulty = infos.get("mass_difficulty", self.mass_curriculum.initial)
         self.distance_difficulty = infos.get("distance_difficulty", self.distance_curriculum.initial)
         self.behind_difficulty = infos.get("behind_difficulty", self.behind_starts.initial)
+        self._episode_tally = torch.tensor(infos.get("curriculum_tally", (0.0, 0.0)), dtype=torch.float64)
+        self._count_episodes_from = infos.get("count_episodes_from", 0)
         return infos

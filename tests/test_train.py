@@ -192,12 +192,29 @@ def test_goal_curriculum_widens_the_success_angle_at_low_levels(tmp_path):
 
 def test_curricula_move_on_a_window_of_ended_episodes(tmp_path):
     """The levels judge the success of at least ``curriculum_window_episodes`` ended episodes, summed over the
-    iterations since they last moved; until then they hold."""
+    iterations since they last moved; until then they hold. After a move, the episodes that end within one episode
+    length (which may have started before it) are not counted, and a resumed run goes on with the same tally."""
     runner = train(apply_overrides(tiny(1), ["curriculum_window_episodes=10"]), tmp_path / "run")
     counts = iter([(4, 1), (4, 3), (4, 0), (0, 0), (12, 12)])
     runner.env.take_episode_counts = lambda: next(counts)
-    rates = [runner.training_success_rate() for _ in range(5)]
+    rates = [runner.training_success_rate(iteration) for iteration in range(5)]
     assert rates[:2] == [None, None] and rates[2] == pytest.approx(4 / 12) and rates[3] is None and rates[4] == 1.0
+
+    run = tmp_path / "moving"
+    overrides = ["curriculum_window_episodes=10", "mass_curriculum.enabled=True", "mass_curriculum.promote_above=0.5"]
+    runner = train(apply_overrides(tiny(1), overrides), run)
+    assert runner.episode_iterations == 167  # 20 s at 50 Hz in rollouts of 6 steps
+    runner.env.take_episode_counts = lambda: (10, 9)
+    runner.apply_curricula(iteration=5, fresh_run=False)  # 90 % of 10 episodes: promoted
+    assert runner.mass_difficulty == runner.mass_curriculum.step
+    for iteration in range(6, 5 + runner.episode_iterations):  # episodes that may have started at the old level
+        runner.apply_curricula(iteration, fresh_run=False)
+    assert runner.mass_difficulty == runner.mass_curriculum.step and runner._episode_tally.sum() == 0
+    runner.env.take_episode_counts = lambda: (6, 6)
+    runner.apply_curricula(5 + runner.episode_iterations, fresh_run=False)  # counted, but fewer than 10
+    assert runner.mass_difficulty == runner.mass_curriculum.step
+    saved = runner.training_state(next_iteration=6 + runner.episode_iterations)["infos"]
+    assert saved["curriculum_tally"] == [6.0, 6.0] and saved["count_episodes_from"] == 5 + runner.episode_iterations
     with pytest.raises(ConfigError, match=r"^curriculum_window_episodes must be an integer >= 1, got 0$"):
         apply_overrides(tiny(1), ["curriculum_window_episodes=0"]).validate()
 

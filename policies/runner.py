@@ -108,7 +108,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self._episode_tally = torch.zeros(2, dtype=torch.float64)  # (ended, succeeded) since the levels last moved
         # Iterations of one full episode: the levels' success counts episodes ending at least that long after a move.
         self.episode_iterations = math.ceil(env.max_episode_length / train_cfg["num_steps_per_env"])
-        self._count_episodes_from = 0  # the first iteration whose ended episodes count (a launch resets every world)
+        self._count_episodes_from = 0  # the first iteration whose ended episodes count (saved in checkpoints)
         self.critic_warmup_iterations = train_cfg.get("critic_warmup_iterations", 0)
         self.critic_warmup_learning_rate = train_cfg.get("critic_warmup_learning_rate")
         self.learning_rate = self.alg.learning_rate  # the configured one, restored after the warm-up

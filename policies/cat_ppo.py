@@ -100,15 +100,19 @@ class CaTPPO(PPO):
             torch.distributed.all_reduce(batch_max, op=torch.distributed.ReduceOp.MAX)
         return batch_max
 
-    def termination_probability(self, constraints: torch.Tensor) -> torch.Tensor:
-        """Update ``c_max`` with a batch of raw constraints ``[num_envs, C]`` and return ``delta`` ``[num_envs]``."""
+    def termination_probabilities(self, constraints: torch.Tensor) -> torch.Tensor:
+        """Update ``c_max`` with a batch of raw constraints ``[num_envs, C]`` and return each column's termination
+        probability ``p_i`` ``[num_envs, C]``."""
         if self.p_max is None:
             raise RuntimeError("p_max is not set: call set_p_max() (CaTOnPolicyRunner does at every iteration).")
         batch_max = self.reduce_batch_max(constraints.amax(dim=0)).clamp(min=self.c_max_floor)
         self.c_max.copy_(torch.where(self.c_max > 0, self.tau * self.c_max + (1.0 - self.tau) * batch_max, batch_max))
         ratio = (constraints / self.c_max).clamp(0.0, 1.0)
-        probabilities = torch.where(constraints > 0, self.p_max * ratio, torch.zeros_like(ratio))
-        return probabilities.amax(dim=1)
+        return torch.where(constraints > 0, self.p_max * ratio, torch.zeros_like(ratio))
+
+    def termination_probability(self, constraints: torch.Tensor) -> torch.Tensor:
+        """Update ``c_max`` with a batch of raw constraints ``[num_envs, C]`` and return ``delta`` ``[num_envs]``."""
+        return self.termination_probabilities(constraints).amax(dim=1)
 
     def act(self, obs: TensorDict) -> torch.Tensor:
         """Sample actions and store transition data; starts a rollout with :attr:`on_rollout_start`."""
@@ -127,14 +131,15 @@ class CaTPPO(PPO):
         (``"episode"`` if present, else ``"log"``).
         """
         constraints = extras["constraints"].to(self.device, torch.float)
-        delta = self.termination_probability(constraints)
+        probabilities = self.termination_probabilities(constraints)
+        delta = probabilities.amax(dim=1)
         step = self.storage.step
         self.deltas[step].copy_(delta.unsqueeze(1))
         super().process_env_step(obs, rewards * self.reward_scale, dones, extras)
         self.storage.rewards[step].mul_(1.0 - self.deltas[step])
 
         log_key = "episode" if "episode" in extras else "log"
-        extras[log_key] = {**extras.get(log_key, {}), **self._step_log(constraints, delta)}
+        extras[log_key] = {**extras.get(log_key, {}), **self._step_log(constraints, probabilities, delta)}
 
     def compute_returns(self, obs: TensorDict) -> None:
         """Compute GAE returns and advantages with the per-step discount ``gamma * (1 - delta_t)``."""
@@ -191,12 +196,16 @@ class CaTPPO(PPO):
         cfg["algorithm"]["constraint_groups"] = [(name, dim) for name, dim in env.constraint_groups]  # type: ignore
         return PPO.construct_algorithm(obs, env, cfg, device)  # type: ignore
 
-    def _step_log(self, constraints: torch.Tensor, delta: torch.Tensor) -> dict[str, torch.Tensor]:
-        """Mean ``delta`` and, per group, the fraction of envs with any column violated."""
-        violated = (constraints > 0).split([dim for _, dim in self.constraint_groups], dim=1)
+    def _step_log(self, constraints: torch.Tensor, probabilities: torch.Tensor, delta: torch.Tensor
+                  ) -> dict[str, torch.Tensor]:
+        """Mean ``delta`` and, per group, the fraction of envs with any column violated and the mean of the group's
+        termination probability (its largest column's): which constraints the pressure comes from."""
+        sizes = [dim for _, dim in self.constraint_groups]
         log = {"CaT/mean_delta": delta.mean()}
-        for (name, _), group in zip(self.constraint_groups, violated):
-            log[f"CaT/violation_rate/{name}"] = group.any(dim=1).float().mean()
+        for (name, _), violated, group_probabilities in zip(
+                self.constraint_groups, (constraints > 0).split(sizes, dim=1), probabilities.split(sizes, dim=1)):
+            log[f"CaT/violation_rate/{name}"] = violated.any(dim=1).float().mean()
+            log[f"CaT/delta/{name}"] = group_probabilities.amax(dim=1).mean()
         return log
 
 

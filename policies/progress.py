@@ -271,6 +271,8 @@ def plot_learning_curve(run_dir: Path, out: Path, paper_success_percent: float |
         if ax_reward.get_legend_handles_labels()[0]:  # runs that logged reward terms
             ax_reward.legend(fontsize=8, loc="upper left")
         ax_delta.plot(hours, smooth(series("CaT/mean_delta")), color="k", label="CaT mean termination probability delta")
+        for key in dict.fromkeys(k for r in records for k in r if k.startswith("CaT/delta/")):
+            ax_delta.plot(hours, smooth(series(key)), lw=0.8, label=f"{key.rsplit('/', 1)[-1]} (its columns' largest)")
         ax_delta.set_ylabel("delta")
         ax_delta.legend(fontsize=8, loc="upper left")
         ax_policy.plot(hours, smooth(series("action_std")), color="tab:blue", label="action std (mean over actions)")

@@ -265,11 +265,19 @@ def test_step_log_reports_delta_and_group_violation_rates():
     log = extras["log"]
     assert log["/env/keep"] == 1.0
     assert log["CaT/mean_delta"].item() == pytest.approx(alg.deltas[0].mean().item())
-    start = 0
+    start, group_deltas = 0, []
+    p_max = p_max_at(0, 20000)
     for name, dim in CONSTRAINT_GROUPS:
-        rate = (extras["constraints"][:, start : start + dim] > 0).any(dim=1).float().mean().item()
+        columns = extras["constraints"][:, start : start + dim]
+        rate = (columns > 0).any(dim=1).float().mean().item()
         assert log[f"CaT/violation_rate/{name}"].item() == pytest.approx(rate)
+        ratio = (columns / alg.c_max[start : start + dim]).clamp(0.0, 1.0)
+        group = torch.where(columns > 0, p_max[start : start + dim] * ratio, 0.0).amax(dim=1)
+        assert log[f"CaT/delta/{name}"].item() == pytest.approx(group.mean().item(), abs=1e-7)
+        group_deltas.append(group)
         start += dim
+    torch.testing.assert_close(torch.stack(group_deltas, dim=1).amax(dim=1), alg.deltas[0, :, 0])
+    assert any(log[f"CaT/delta/{name}"] > 0 for name, _ in CONSTRAINT_GROUPS)
 
 
 def test_checkpoint_round_trip_keeps_c_max(tmp_path):

@@ -8,6 +8,8 @@ from pathlib import Path
 import pytest
 
 from dynpush.cli import main
+from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
+from dynpush.policies.schedules import ConstraintCurriculumConfig
 from dynpush.policies.train import TrainConfig
 from dynpush.policies.training import apply_overrides, apply_recipe, read_recipe
 from dynpush.sim.config import ConfigError
@@ -89,8 +91,8 @@ def test_recipe_errors_are_one_line(tmp_path, capsys, monkeypatch, command, argv
 
 
 def test_the_curricula_recipe_is_the_long_run_with_every_curriculum_and_cat_from_zero():
-    """The curricula recipe differs from the long run's in its curricula and CaT's p_max curriculum only: from 0, with
-    the curricula's level."""
+    """The curricula recipe differs from the long run's in its curricula and CaT's p_max curriculum only: from a tenth of
+    the paper's final values to them, with the curricula's level."""
     long_run = config_of(read_recipe(RECIPES / "long_run.txt"))
     curricula = config_of(read_recipe(RECIPES / "curricula_from_scratch.txt"))
     TrainConfig.from_dict(curricula).validate()
@@ -100,5 +102,9 @@ def test_the_curricula_recipe_is_the_long_run_with_every_curriculum_and_cat_from
     assert all(curricula[key]["enabled"] for key in ("curriculum", "distance_curriculum", "mass_curriculum",
                                                      "behind_starts"))
     assert curricula["behind_starts"]["share"] == 1.0
-    assert all(initial == 0.0 for initial, _ in curricula["p_max_overrides"].values())
+    assert set(curricula["p_max_overrides"]) == {name for name, _ in CONSTRAINT_GROUPS}
+    for name, (initial, final) in curricula["p_max_overrides"].items():  # a tenth of the paper's final values first
+        assert final == ConstraintCurriculumConfig().p_max[name][1] and initial == pytest.approx(final / 10), name
     assert curricula["p_max_follows_curricula"] is True
+    assert {(curricula[key]["promote_above"], curricula[key]["demote_below"]) for key in (
+        "curriculum", "distance_curriculum", "mass_curriculum", "behind_starts")} == {(0.2, 0.05)}

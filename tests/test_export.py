@@ -120,12 +120,19 @@ def test_cli_export_of_a_chosen_checkpoint(exported, tmp_path):
         export_policy(run, "model_7.pt", tmp_path / "missing.onnx")
 
 
-def test_the_committed_long_run_loads_and_exports_from_its_checkpoint(tmp_path):
-    """The long run in campaigns/ resumes from its latest checkpoint in later sittings: that file keeps loading into
-    today's actor and exporting, whatever the code around it becomes."""
-    run = Path(__file__).resolve().parent.parent / "campaigns" / "long1"
+CAMPAIGNS = sorted(path.parent for path in (Path(__file__).resolve().parent.parent / "campaigns").glob("*/config.json"))
+
+
+def test_the_project_long_run_is_committed():
+    assert CAMPAIGNS, "campaigns/ holds no run: the project's long run lives in the repository"
+
+
+@pytest.mark.parametrize("run", CAMPAIGNS, ids=[run.name for run in CAMPAIGNS])
+def test_the_committed_long_runs_load_and_export_from_their_checkpoints(run, tmp_path):
+    """The long runs in campaigns/ resume from their latest checkpoints in later sittings: those files keep loading
+    into today's actor and exporting, whatever the code around it becomes."""
     checkpoint = max(run.glob("model_*.pt"), key=lambda path: int(path.stem.split("_")[1]))
-    out = tmp_path / "long1.onnx"
+    out = tmp_path / f"{run.name}.onnx"
     assert main(["export", str(run), "--checkpoint", checkpoint.name, "--out", str(out)]) == 0
     actor = load_actor(checkpoint, load_run_config(run))
     obs = observations(actor, 8, seed=3)

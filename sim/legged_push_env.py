@@ -35,7 +35,7 @@ from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
 from dynpush.runtime.locomotion_contract import LocomotionContract
 
 from .push_env import PushEnv
-from .legged_scene import legged_view, locomotion_task
+from .legged_scene import legged_view, locomotion_task, mujoco_solver
 from .scene import build_scene
 
 LEG_TORQUE_COLUMN = sum(size for _, size in itertools.takewhile(lambda group: group[0] != "leg_joint_torque", CONSTRAINT_GROUPS))
@@ -81,13 +81,10 @@ class LeggedPushEnv(PushEnv):
         return build_scene(self.cfg.num_envs, self.cfg.device, legged=True)
 
     def _make_solver(self) -> None:
-        import mujoco_warp
         import newton
 
-        model, m = self.scene.model, self.cfg.legged.mujoco
-        self.solver = newton.solvers.SolverMuJoCo(model, use_mujoco_contacts=False, solver=m.solver, iterations=m.iterations,
-                                                  ls_iterations=m.ls_iterations, nconmax=m.nconmax, njmax=m.njmax)
-        self.solver.mjw_model.opt.warn_overflow &= ~(mujoco_warp.OverflowType.ITERATIONS | mujoco_warp.OverflowType.LS_ITERATIONS)
+        model = self.scene.model
+        self.solver = mujoco_solver(model, self.cfg.legged.mujoco, use_mujoco_contacts=False)
         self.state_0, self.state_1 = model.state(), model.state()
         self.control = model.control()
         self.collision = newton.CollisionPipeline(model, rigid_contact_max=self.cfg.sim.contacts_per_world * self.num_envs)

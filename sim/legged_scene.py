@@ -17,6 +17,8 @@ from pxr import Usd
 from dynpush.assets_usd import ARM_JOINT_NAMES, EE_SHAPE, GROUND_USD, LEG_JOINT_NAMES, ROBOT_LEGGED_USD
 from dynpush.kernels.locomotion import views as loco_views
 
+from .config import MuJoCoConfig
+
 LEGS = ("LF", "RF", "LH", "RH")
 
 
@@ -151,6 +153,18 @@ def build_legged_scene(num_worlds: int, device: str) -> LeggedScene:
         ee_body=w[:, 0] * bodies + robot.shape_body[ee_shape],
         ee_offset=np.array(wp.transform_get_translation(robot.shape_transform[ee_shape]), dtype=np.float64),
     )
+
+
+def mujoco_solver(model: newton.Model, cfg: MuJoCoConfig, use_mujoco_contacts: bool) -> newton.solvers.SolverMuJoCo:
+    """MuJoCo-Warp on ``model`` with ``cfg``'s solver, iteration caps and buffers. The iteration caps are deliberate
+    (``MuJoCoConfig``): only buffer overflows still warn."""
+    import mujoco_warp
+
+    solver = newton.solvers.SolverMuJoCo(model, use_mujoco_contacts=use_mujoco_contacts, solver=cfg.solver,
+                                         iterations=cfg.iterations, ls_iterations=cfg.ls_iterations,
+                                         nconmax=cfg.nconmax, njmax=cfg.njmax)
+    solver.mjw_model.opt.warn_overflow &= ~(mujoco_warp.OverflowType.ITERATIONS | mujoco_warp.OverflowType.LS_ITERATIONS)
+    return solver
 
 
 def legged_view(state: newton.State, base_body, base_q_start, base_qd_start, robot_qd_count: int, leg_q, leg_qd, arm_q,

@@ -32,7 +32,7 @@ from dynpush.runtime.actions import BASE_COMMAND_NAMES
 
 from .config import ConfigError
 from .env_state import EnvBase, articulation_reset_mask
-from .legged_scene import build_legged_scene, legged_view, locomotion_task
+from .legged_scene import build_legged_scene, legged_view, locomotion_task, mujoco_solver
 from .locomotion_config import LocomotionEnvConfig
 
 wp.config.enable_backward = False
@@ -61,13 +61,7 @@ class LocomotionEnv(EnvBase, VecEnv):
         self.scene = build_legged_scene(cfg.num_envs, cfg.device)
         model = self.scene.model
         # MuJoCo's contacts: feet, knees and base against the ground plane only (no self-collisions).
-        m = cfg.mujoco
-        self.solver = newton.solvers.SolverMuJoCo(model, use_mujoco_contacts=True, solver=m.solver, iterations=m.iterations,
-                                                  ls_iterations=m.ls_iterations, nconmax=m.nconmax, njmax=m.njmax)
-        # The iteration cap is deliberate (MuJoCoConfig); buffer overflows still warn.
-        import mujoco_warp
-
-        self.solver.mjw_model.opt.warn_overflow &= ~(mujoco_warp.OverflowType.ITERATIONS | mujoco_warp.OverflowType.LS_ITERATIONS)
+        self.solver = mujoco_solver(model, cfg.mujoco, use_mujoco_contacts=True)
         self.state_0, self.state_1 = model.state(), model.state()
         # Ground contact force on each lower leg (foot sphere and shank), from MuJoCo's constraint forces
         # of the control step's last substep, for the foot contact force constraint.

@@ -66,10 +66,8 @@ class EnvBase:
     ``load_state_dict`` with its hooks).
 
     An environment supplies: the class attributes ``reward_names``, ``num_actions`` and ``_constraint_groups``;
-    :meth:`_build` (scene, solver, buffers and parameters; it sets ``_reward_weights``, the Warp buffers ``raw_actions``,
-    ``policy_obs``, ``critic_obs``, ``reward``, ``reward_terms``, ``reset_flags``, ``time_out``, ``constraints``, their
-    torch views ``actions_t``, ``policy_obs_t``, ``critic_obs_t``, ``reward_t``, ``reward_terms_t``, ``reset_t``,
-    ``time_out_t``, ``constraints_t``, and ``task``, ``state_0``, ``control``), :meth:`_step_kernels`,
+    :meth:`_build` (scene, solver, buffers and parameters; it sets ``_reward_weights``, ``task``, ``state_0``, ``control``
+    and calls :meth:`_make_step_buffers`), :meth:`_step_kernels`,
     :meth:`_reset_flagged`, :meth:`_observe`, :meth:`_ended_episodes`, :meth:`_ended_episode_log` and
     :meth:`_state_arrays`; it may override :meth:`_capture`, :meth:`_launch_step` and the state-loading hooks."""
 
@@ -102,6 +100,26 @@ class EnvBase:
     def _build(self) -> None:
         """Scene, solver, buffers and parameters (inside the Warp device)."""
         raise NotImplementedError
+
+    def _make_step_buffers(self, num_policy_obs: int, num_critic_obs: int, num_constraints: int) -> None:
+        """The Warp buffers every step writes (actions, observations, reward and its terms, reset and time-out flags,
+        constraints) and their zero-copy torch views; ``task.episode_step`` as ``episode_length_buf``."""
+        n = self.num_envs
+        self.raw_actions = wp.zeros((n, self.num_actions), dtype=float)
+        self.policy_obs = wp.zeros((n, num_policy_obs), dtype=float)
+        self.critic_obs = wp.zeros((n, num_critic_obs), dtype=float)
+        self.reward = wp.zeros(n, dtype=float)
+        self.reward_terms = wp.zeros((n, len(self.reward_names)), dtype=float)
+        self.reset_flags = wp.zeros(n, dtype=int)
+        self.time_out = wp.zeros(n, dtype=int)
+        self.constraints = wp.zeros((n, num_constraints), dtype=float)
+        t = wp.to_torch
+        self.actions_t = t(self.raw_actions)
+        self.policy_obs_t, self.critic_obs_t = t(self.policy_obs), t(self.critic_obs)
+        self.reward_t, self.reward_terms_t = t(self.reward), t(self.reward_terms)
+        self.reset_t, self.time_out_t = t(self.reset_flags), t(self.time_out)
+        self.constraints_t = t(self.constraints)
+        self.episode_length_buf = t(self.task.episode_step)
 
     # ------------------------------------------------------------------ the step
     def _capture(self) -> None:

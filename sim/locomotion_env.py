@@ -83,26 +83,11 @@ class LocomotionEnv(EnvBase, VecEnv):
                                 scene.leg_q, scene.leg_qd, scene.arm_q, scene.arm_qd, scene.shank_body)
 
         self.ee_body = wp.array(np.asarray(scene.ee_body, dtype=np.int32), dtype=int)
-        self.raw_actions = wp.zeros((n, views_k.NUM_LEG_JOINTS), dtype=float)
-        self.policy_obs = wp.zeros((n, observations_k.NUM_POLICY_OBS), dtype=float)
-        self.critic_obs = wp.zeros((n, observations_k.NUM_CRITIC_OBS), dtype=float)
-        self.reward = wp.zeros(n, dtype=float)
-        self.reward_terms = wp.zeros((n, len(REWARD_TERMS)), dtype=float)
+        self._make_step_buffers(observations_k.NUM_POLICY_OBS, observations_k.NUM_CRITIC_OBS, constraints_k.NUM_CONSTRAINTS)
         self.tracking_error = wp.zeros((n, views_k.NUM_COMMANDS), dtype=float)
-        self.constraints = wp.zeros((n, constraints_k.NUM_CONSTRAINTS), dtype=float)
         self.foot_force = wp.zeros((n, views_k.NUM_FEET), dtype=float)  # [N]
-        self.reset_flags = wp.zeros(n, dtype=int)
-        self.time_out = wp.zeros(n, dtype=int)
         self.articulation_mask = wp.zeros(self.scene.model.articulation_count, dtype=bool)
-
-        t = wp.to_torch
-        self.actions_t = t(self.raw_actions)
-        self.policy_obs_t, self.critic_obs_t = t(self.policy_obs), t(self.critic_obs)
-        self.reward_t, self.reward_terms_t = t(self.reward), t(self.reward_terms)
-        self.tracking_error_t = t(self.tracking_error)  # (N, 6) command - measured, COMMAND_NAMES order
-        self.constraints_t = t(self.constraints)
-        self.reset_t, self.time_out_t = t(self.reset_flags), t(self.time_out)
-        self.episode_length_buf = t(self.task.episode_step)
+        self.tracking_error_t = wp.to_torch(self.tracking_error)  # (N, 6) command - measured, COMMAND_NAMES order
 
     def _make_params(self) -> None:
         cfg, robot = self.cfg, self.scene.robot

@@ -149,20 +149,13 @@ class PushEnv(EnvBase, VecEnv):
 
         model = scene.model
         self.views = [self._robot_view(s) for s in (self.state_0, self.state_1)]
-        self.raw_actions = zeros((n, NUM_ACTIONS))
+        self._make_step_buffers(NUM_POLICY_OBS, NUM_CRITIC_OBS, constraints_k.NUM_CONSTRAINTS)
         self.command_base = zeros((n, 6))  # step_commands: the base command and arm targets given as they are
         self.command_arm = zeros((n, NUM_ARM_JOINTS))
-        self.policy_obs = zeros((n, NUM_POLICY_OBS))
-        self.critic_obs = zeros((n, NUM_CRITIC_OBS))
-        self.reward = zeros(n)
-        self.reward_terms = zeros((n, len(REWARD_TERMS)))
         self.success = zeros(n, int)
-        self.reset_flags = zeros(n, int)
-        self.time_out = zeros(n, int)
         self.episode_success = wp.full(n, -1, dtype=int)
         self.episode_toppled = zeros(n, int)
         self.episode_diverged = zeros(n, int)
-        self.constraints = zeros((n, constraints_k.NUM_CONSTRAINTS))
         self.variant = zeros(n, int)
         self.goal_difficulty = wp.ones(1, dtype=float)  # 1: the paper's goal distribution
         # (low, high) [kg] of the object masses drawn from now on: randomization.mass unless a training curriculum
@@ -201,22 +194,13 @@ class PushEnv(EnvBase, VecEnv):
 
         # Zero-copy torch views.
         t = wp.to_torch
-        self.actions_t = t(self.raw_actions)
         self.command_base_t, self.command_arm_t = t(self.command_base), t(self.command_arm)
-        self.policy_obs_t = t(self.policy_obs)
-        self.critic_obs_t = t(self.critic_obs)
         self.critic_input_columns = torch.tensor(observations_k.critic_input_columns(), device=self.critic_obs_t.device)
-        self.reward_t = t(self.reward)
-        self.reward_terms_t = t(self.reward_terms)
-        self.reset_t = t(self.reset_flags)
-        self.time_out_t = t(self.time_out)
-        self.constraints_t = t(self.constraints)
         self.episode_success_t = t(self.episode_success)
         self.episode_toppled_t = t(self.episode_toppled)
         self.episode_diverged_t = t(self.episode_diverged)
         self.success_t = t(self.success)
         self.near_goal_ended_t = t(self.near_goal_ended)
-        self.episode_length_buf = t(task.episode_step)
 
     def _robot_view(self, state: newton.State) -> RobotView:
         scene, model = self.scene, self.scene.model

@@ -1,13 +1,14 @@
 """On-policy runner for CaT-PPO: rsl_rl's OnPolicyRunner plus the push task's iteration schedules.
 
-rsl_rl's learning loop is used unchanged. :class:`~dynpush.policies.cat_ppo.CaTPPO` reads ``extras["constraints"]``
-in its ``process_env_step`` and adds its statistics to the extras that rsl_rl's logger averages per iteration
+rsl_rl's learning loop is used unchanged. :class:`~dynpush.policies.cat_ppo.CaTPPO` reads ``extras["constraints"]`` in
+its ``process_env_step`` and adds its statistics to the extras that rsl_rl's logger averages per iteration
 (``CaT/mean_delta``, ``CaT/violation_rate/<group>``, ``CaT/delta/<group>``). This runner builds CaT-PPO and, at the
-start of every iteration, applies the ``p_max`` curricula and the reach-reward weight (:mod:`dynpush.policies.schedules`)
-and keeps a snapshot of the training state, so that an interrupted run saves the last iteration boundary. Checkpoints also hold
-the environment's state and the RNG state, so a resumed run continues exactly as an uninterrupted one. At an iteration
-boundary it also evaluates the actor when an evaluation is due (``evaluation``), and a launch with a
-:class:`TimeBudget` ends there, with a checkpoint, when the next iteration would not end in time.
+start of every iteration, applies the ``p_max`` curricula and the reach-reward weight
+(:mod:`dynpush.policies.schedules`) and keeps a snapshot of the training state, so that an interrupted run saves the
+last iteration boundary. Checkpoints also hold the environment's state and the RNG state, so a resumed run continues
+exactly as an uninterrupted one. At an iteration boundary it also evaluates the actor when an evaluation is due
+(``evaluation``), and a launch with a :class:`TimeBudget` ends there, with a checkpoint, when the next iteration would
+not end in time.
 """
 
 from __future__ import annotations

@@ -121,6 +121,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self.keep_checkpoints = train_cfg.get("keep_checkpoints", 0)  # newest model_K.pt kept (0: all)
         self.evaluation: Evaluation | None = None  # set on rank 0 by a run that evaluates during training
         self._snapshot: dict | None = None
+        self._due_saves: list[tuple[str, dict | None]] = []  # (path, infos) that save() put off to a boundary
 
     def learn(
         self, num_learning_iterations: int, init_at_random_ep_len: bool = False, total_iterations: int | None = None,
@@ -149,6 +150,7 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             if any(cfg.enabled for cfg in self.success_gated_curricula()):
                 self.apply_curricula(it, fresh_run=it == 0)
             self._snapshot = {"iteration": it, **copy.deepcopy(self.training_state(next_iteration=it))}
+            self.write_due_saves({k: v for k, v in self._snapshot.items() if k != "iteration"})
             if evaluating:  # after the snapshot: an interrupted evaluation loses no iteration
                 seconds = self.evaluate(it)
                 iteration_start += seconds
@@ -171,6 +173,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             super().learn(num_learning_iterations, init_at_random_ep_len)
         except TimeBudgetSpent:
             self.stop_early()
+        if self.is_distributed:  # the launch's last checkpoint, which rank 0's save put off (every process gathers)
+            self.write_due_saves(self.training_state(next_iteration=self.current_learning_iteration + 1))
 
     def evaluate(self, iteration: int) -> float:
         """Runs the evaluation due before ``iteration``; returns its wall-clock [s], which the logger leaves out of the
@@ -313,21 +317,43 @@ class CaTOnPolicyRunner(OnPolicyRunner):
 
     def training_state(self, next_iteration: int) -> dict:
         """What a checkpoint holds: the algorithm's state, the iteration a resumed run starts at, the environment's
-        state and torch's random state."""
+        state and torch's random state. In a run of several processes every process calls it (it gathers): rank 0's
+        also holds the other processes' environment and random states (``other_processes``, in rank order)."""
         saved = self.alg.save()
         saved["iter"] = next_iteration
-        saved["infos"] = {"env_state": self.env.state_dict(), "torch_rng": torch.get_rng_state(),
-                          "mass_difficulty": self.mass_difficulty, "distance_difficulty": self.distance_difficulty,
-                          "behind_difficulty": self.behind_difficulty, "curriculum_tally": self._episode_tally.tolist(),
+        own = {"env_state": self.env.state_dict(), "torch_rng": torch.get_rng_state()}
+        saved["infos"] = {**own, "mass_difficulty": self.mass_difficulty,
+                          "distance_difficulty": self.distance_difficulty, "behind_difficulty": self.behind_difficulty,
+                          "curriculum_tally": self._episode_tally.tolist(),
                           "count_episodes_from": self._count_episodes_from}
+        if self.is_distributed:
+            gathered = [None] * self.gpu_world_size if self.gpu_global_rank == 0 else None
+            torch.distributed.gather_object(own, gathered, dst=0)
+            if gathered is not None:
+                saved["infos"]["other_processes"] = gathered[1:]
         return saved
 
     def save(self, path: str, infos: dict | None = None) -> None:
-        """Save models, optimiser, CaT state, environment state and RNG; ``iter`` is the next iteration to run."""
-        saved = self.training_state(next_iteration=self.current_learning_iteration + 1)
-        saved["infos"].update(infos or {})
-        save_checkpoint(saved, Path(path), self.keep_checkpoints)
-        self.logger.save_model(path, self.current_learning_iteration)
+        """Save models, optimiser, CaT state, environment state and RNG; ``iter`` is the next iteration to run.
+
+        rsl_rl calls it on rank 0 only; in a run of several processes the checkpoint is written at the next iteration
+        boundary (or at the end of the launch), where every process's state is gathered."""
+        if self.is_distributed:
+            self._due_saves.append((path, infos))
+            return
+        self.write_checkpoint(path, self.training_state(next_iteration=self.current_learning_iteration + 1), infos)
+
+    def write_checkpoint(self, path: str, state: dict, infos: dict | None = None) -> None:
+        """Writes ``state`` (:meth:`training_state`) with ``infos`` added to its infos."""
+        state["infos"].update(infos or {})
+        save_checkpoint(state, Path(path), self.keep_checkpoints)
+        self.logger.save_model(path, state["iter"] - 1)
+
+    def write_due_saves(self, state: dict) -> None:
+        """Writes the checkpoints :meth:`save` put off with ``state``, the boundary they were due at."""
+        while self._due_saves:
+            path, infos = self._due_saves.pop(0)
+            self.write_checkpoint(path, copy.deepcopy(state), infos)
 
     def save_interrupted(self) -> str:
         """Save the snapshot of the last iteration boundary (the interrupted iteration is re-run on resume)."""
@@ -356,8 +382,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         self, path: str, load_cfg: dict | None = None, strict: bool = True, map_location: str | None = None,
         restore_env: bool = True,
     ) -> dict:
-        """Load a checkpoint; restores the RNG, and the environment unless ``restore_env`` is False (a run
-        resumed with another number of processes starts fresh episodes)."""
+        """Load a checkpoint and the curricula's levels; restores the environments and the RNG unless ``restore_env`` is
+        False (:meth:`restore_processes`)."""
         loaded = read_checkpoint(path, map_location)
         for key in ("actor_state_dict", "critic_state_dict", "iter"):
             if key not in loaded:
@@ -365,18 +391,35 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         if self.alg.load(loaded, load_cfg, strict):
             self.current_learning_iteration = loaded["iter"]
         infos = loaded.get("infos") or {}
-        if restore_env and "env_state" in infos:
-            mismatch = self.env.state_mismatch(infos["env_state"])
-            if mismatch is None:
-                self.env.load_state_dict(infos["env_state"])
-            else:  # saved by a run with another number of processes: its rank-0 shard only
-                print(f"{path}: fresh episodes, the saved environment state does not fit ({mismatch})")
-                self.env.set_goal_difficulty(float(infos["env_state"]["goal_difficulty"][0]))  # the curriculum goes on
-        if "torch_rng" in infos:
-            torch.set_rng_state(infos["torch_rng"])
         self.mass_difficulty = infos.get("mass_difficulty", self.mass_curriculum.initial)
         self.distance_difficulty = infos.get("distance_difficulty", self.distance_curriculum.initial)
         self.behind_difficulty = infos.get("behind_difficulty", self.behind_starts.initial)
         self._episode_tally = torch.tensor(infos.get("curriculum_tally", (0.0, 0.0)), dtype=torch.float64)
         self._count_episodes_from = infos.get("count_episodes_from", 0)
+        if restore_env and "env_state" in infos:
+            self.restore_processes(path, infos, loaded["iter"])
         return infos
+
+    def restore_processes(self, path: str, infos: dict, next_iteration: int) -> None:
+        """Every process continues its own saved episodes and random state when the checkpoint holds one state per
+        process and they fit its environment. Otherwise (another number of processes or of worlds, or a checkpoint of
+        several processes that saved rank 0's only) every process starts fresh episodes at the saved goal difficulty,
+        with its own seed, and the curricula count only episodes that end one episode length after ``next_iteration``:
+        fresh episodes all start at once and end together."""
+        own = {"env_state": infos["env_state"], "torch_rng": infos.get("torch_rng")}
+        states = [own, *infos.get("other_processes", ())]
+        world_size, rank = (self.gpu_world_size, self.gpu_global_rank) if self.is_distributed else (1, 0)
+        if len(states) != world_size:
+            mismatch = f"saved by {len(states)} process(es), resumed by {world_size}"
+        else:
+            mismatch = self.env.state_mismatch(states[rank]["env_state"])
+        if mismatch is None:
+            self.env.load_state_dict(states[rank]["env_state"])
+            if states[rank]["torch_rng"] is not None:
+                torch.set_rng_state(states[rank]["torch_rng"])
+            return
+        if rank == 0:
+            print(f"{path}: fresh episodes, the saved environment state does not fit ({mismatch})")
+        self.env.set_goal_difficulty(float(infos["env_state"]["goal_difficulty"][0]))  # the curriculum goes on
+        self._episode_tally.zero_()
+        self._count_episodes_from = next_iteration + self.episode_iterations

@@ -362,9 +362,8 @@ def start_from(runner: CaTOnPolicyRunner, cfg: TaskTrainConfig, run_dir: Path, r
     which newer ones were unreadable), another run's actor and critic (``init_from`` checkpoint) or an exported
     actor (``onnx_actor``); then holds the actor's normaliser if the config says so."""
     if resume:
-        # A run resumed with another number of processes cannot restore the saved shard: fresh episodes.
-        checkpoint, skipped = load_newest_readable(
-            run_dir, lambda path: runner.load(str(path), restore_env=group.world_size == 1))
+        # Each process continues its own episodes where the checkpoint holds them (CaTOnPolicyRunner.restore_processes).
+        checkpoint, skipped = load_newest_readable(run_dir, lambda path: runner.load(str(path)))
         if skipped and group.rank == 0:
             print(f"--resume: skipped unreadable {', '.join(skipped)}; resuming from {checkpoint.name}")
     elif onnx_actor is not None:

@@ -477,7 +477,7 @@ def test_mass_curriculum_run_starts_light_resumes_its_level_and_eval_envs_keep_t
 
 
 def test_resume_with_another_env_layout_starts_fresh_episodes(tmp_path, capsys):
-    """A run saved by 2 processes holds rank 0's shard only; resumed by 1 process it cannot restore it."""
+    """A run resumed with another number of worlds per process cannot restore the saved episodes."""
     run = tmp_path / "run"
     train(tiny(2), run)
     config = json.loads((run / "config.json").read_text())
@@ -491,3 +491,6 @@ def test_resume_with_another_env_layout_starts_fresh_episodes(tmp_path, capsys):
     assert resumed.current_learning_iteration == 2 and resumed.env.num_envs == 4
     assert resumed.env.goal_difficulty_value == pytest.approx(0.35)
     assert "fresh episodes, the saved environment state does not fit" in capsys.readouterr().out
+    # Fresh episodes start together and end together: the curricula judge from one episode length on.
+    resumed_state = torch.load(run / "model_2.pt", weights_only=False)["infos"]
+    assert resumed_state["count_episodes_from"] == 2 + resumed.episode_iterations

@@ -35,7 +35,7 @@ def measure(num_envs: int, steps: int, split: bool, overrides: tuple[str, ...] =
             queue=None) -> dict:
     import warp as wp
 
-    from dynpush.policies.training import apply_overrides
+    from dynpush.policies.overrides import apply_overrides
     from dynpush.sim.config import PushEnvConfig
     from dynpush.sim.push_env import PushEnv
 

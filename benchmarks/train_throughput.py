@@ -109,7 +109,7 @@ def config_summary(overrides: list[str]) -> dict:
     """The TrainConfig of ``overrides`` on the cpu preset, validated (a typo stops here, before any run), and the
     fields that set the cost of an iteration."""
     from dynpush.policies.train import TrainConfig
-    from dynpush.policies.training import apply_overrides
+    from dynpush.policies.overrides import apply_overrides
 
     cfg = apply_overrides(TrainConfig.preset_config("cpu"), overrides).validate()
     return {"num_envs": cfg.env.num_envs, "num_steps_per_env": cfg.num_steps_per_env,
@@ -146,7 +146,7 @@ def main() -> int:
     if args.warmup < 1 or args.iterations < 1 or args.repeats < 1:
         parser.error("--warmup, --iterations and --repeats must be >= 1")
 
-    from dynpush.policies.training import read_recipe
+    from dynpush.policies.overrides import read_recipe
 
     recipe = read_recipe(args.recipe)
     harness = benchmark_overrides(args.iterations, args.warmup)

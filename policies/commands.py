@@ -45,7 +45,9 @@ def _train(args: argparse.Namespace) -> int:
     from dynpush.sim.config import ConfigError
 
     from .tasks import TASKS
-    from .training import apply_recipe, launch_processes, run_config, train
+    from .overrides import apply_recipe
+    from .processes import launch_processes
+    from .training import run_config, train
 
     started = args.launched_at or time.time()  # --hours counts from the user's launch
     argv = args.argv[args.argv.index("train") + 1 :]
@@ -83,7 +85,7 @@ def _imitate(args: argparse.Namespace) -> int:
 
     from .imitation import ImitationConfig, imitate
     from .train import TrainConfig
-    from .training import apply_recipe
+    from .overrides import apply_recipe
 
     if args.recipe and args.resume:
         raise ConfigError("--recipe configures a new run; --resume continues a run with its own config")

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from dynpush.sim.config import ConfigError
 
 from .scripted import ScriptedPusherConfig, check_object_size
-from .training import apply_overrides
+from .overrides import apply_overrides
 
 SECTION = "fine_tune"  # the TrainConfig field that holds a FineTuneConfig
 

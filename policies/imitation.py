@@ -41,7 +41,7 @@ from .scripted import ScriptedPusher, ScriptedPusherConfig, check_object_size
 from .run_folder import IMITATION_CHECKPOINT, read_json, read_run_config, record_launch
 from .fine_tune import scripted_expert
 from .train import TrainConfig
-from .training import sigterm_as_keyboard_interrupt
+from .processes import sigterm_as_keyboard_interrupt
 
 
 @dataclass

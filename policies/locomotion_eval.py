@@ -25,7 +25,7 @@ from dynpush.sim.config import ConfigError
 from dynpush.sim.locomotion_env import COMMAND_NAMES, CONSTRAINT_GROUPS, LocomotionEnv
 
 from .locomotion_train import LocomotionTrainConfig
-from .training import apply_overrides
+from .overrides import apply_overrides
 
 UNITS = ("m/s", "m/s", "rad/s", "rad", "rad", "m")
 # Units of the constraint values (value - limit) of each group of CONSTRAINT_GROUPS.

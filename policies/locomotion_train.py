@@ -22,7 +22,8 @@ from dynpush.sim.config import ConfigError
 from dynpush.sim.locomotion_config import LocomotionEnvConfig
 
 from .schedules import DisturbanceRampConfig
-from .training import PRESETS, NetworkConfig, PPOConfig, config_from_dict, rsl_rl_runner_cfg
+from .overrides import config_from_dict
+from .training import PRESETS, NetworkConfig, PPOConfig, rsl_rl_runner_cfg
 
 
 def _no_terminations() -> dict[str, tuple[float, float]]:

@@ -1,9 +1,9 @@
 """The push task's training configuration and presets (``dynpush train``).
 
 The ``paper`` preset is the paper's scale (4096 environments, 20000 iterations, III-A) on a GPU; the ``cpu``
-preset is sized for a 2-core laptop-class machine. What every task's training shares (PPO and network configs,
-``--set`` overrides, the ``train`` job itself) is in ``policies/training.py``; its names below are re-exported
-here for the callers that import them from this module. The knobs of a run that starts from another policy or
+preset is sized for a 2-core laptop-class machine. What every task's training shares (PPO and network configs, the
+``train`` job itself) is in ``policies/training.py``, ``--set`` overrides in ``policies/overrides.py``; the names
+imported below from both are re-exported here for the callers that import them from this module. The knobs of a run that starts from another policy or
 follows the scripted pusher are in ``policies/fine_tune.py`` (``TrainConfig.fine_tune``).
 """
 
@@ -22,20 +22,14 @@ from .curriculum import (
 )
 from .expert_regularization import ExpertLabelledEnv
 from .fine_tune import MOVED_FIELDS, FineTuneConfig
+from .overrides import apply_overrides, config_from_dict  # noqa: F401  (apply_overrides: re-exported)
 from .schedules import ConstraintCurriculumConfig
 from .training import (  # noqa: F401  (re-exported: the CLI, tests and benchmarks import them from here)
     PRESETS,
     NetworkConfig,
     PPOConfig,
-    ProcessGroup,
-    apply_overrides,
-    config_from_dict,
-    launch_processes,
     rsl_rl_runner_cfg,
-    run_config,
-    sigterm_as_keyboard_interrupt,
     train,
-    tuple_like,
 )
 
 

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 from dynpush.sim.config import ConfigError, LeggedModeConfig, PushEnvConfig
 
 from .train import TrainConfig
-from .training import apply_overrides
+from .overrides import apply_overrides
 
 if TYPE_CHECKING:
     from .onnx_policy import OnnxPolicy

@@ -1,6 +1,6 @@
-"""What every task's training shares: PPO and network configs, config files and ``--set`` overrides, the rsl_rl
-runner configuration, process groups, and the ``dynpush train`` job (new run, resume, start from another run,
-SIGTERM, torchrun launch).
+"""What every task's training shares: PPO and network configs, the rsl_rl runner configuration, and the ``dynpush
+train`` job (new run, resume, start from another run, SIGTERM). Config files and overrides live in
+:mod:`~dynpush.policies.overrides`, the torchrun launch and its signals in :mod:`~dynpush.policies.processes`.
 
 A task's training config (``train.TrainConfig`` for the push task, ``locomotion_train.LocomotionTrainConfig``)
 holds its environment config and these shared parts, and says how to build its environment and its runner
@@ -10,32 +10,25 @@ defaults are rsl_rl's own (those of legged_gym / Isaac Lab locomotion tasks).
 
 from __future__ import annotations
 
-import ast
-import contextlib
 import dataclasses
-import os
-import signal
-import subprocess
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol, TypeVar
+from typing import Any, Protocol, TypeVar
 
 import torch
 
 from dynpush.errors import MissingFileError
-from dynpush.sim.config import ConfigError, PushEnvConfig
+from dynpush.sim.config import ConfigError
 
 from .actor import build_actor, load_onnx_actor
+from .processes import ProcessGroup, sigterm_as_keyboard_interrupt
 from .run_folder import CONFIG, check_new_run, load_newest_readable, read_json, record_launch, write_config
 from .runner import CaTOnPolicyRunner, TimeBudget
 from .training_eval import PeriodicEvaluation
 
-if TYPE_CHECKING:
-    from dynpush.sim.locomotion_config import LocomotionEnvConfig
-
 PRESETS = ("cpu", "paper")
-T = TypeVar("T")  # a config dataclass
+T = TypeVar("T")  # a task's training config dataclass
 
 
 class TaskTrainConfig(Protocol):
@@ -141,132 +134,6 @@ def rsl_rl_runner_cfg(num_steps_per_env: int, save_interval: int, ppo: PPOConfig
         "logger": "tensorboard",
         "check_for_nan": True,
     }
-
-
-def config_from_dict(cls: type[T], data: dict) -> T:
-    """The config dataclass ``cls`` from a dict (a config.json): unknown fields are a ConfigError, nested dicts
-    become their field's dataclass, lists become tuples where the default is a tuple; missing fields keep their
-    defaults."""
-    kwargs = {}
-    names = {f.name: f for f in dataclasses.fields(cls)}
-    for key, value in data.items():
-        if key not in names:
-            raise ConfigError(f"unknown config field {cls.__name__}.{key}; allowed: {sorted(names)}")
-        default = getattr(cls(), key)
-        if dataclasses.is_dataclass(default):
-            value = config_from_dict(type(default), value)
-        elif isinstance(default, tuple):
-            value = tuple(value)
-        kwargs[key] = value
-    return cls(**kwargs)
-
-
-def read_recipe(path: Path) -> list[str]:
-    """The ``field.path=value`` overrides of a recipe file (``dynpush train --recipe``), in file order.
-
-    One override per line, written as on the command line but without shell quoting; blank lines and lines that start
-    with ``#`` are skipped. A missing file is a MissingFileError, a line without ``=`` a ConfigError naming the file
-    and the line.
-    """
-    try:
-        text = Path(path).read_text()
-    except FileNotFoundError:
-        raise MissingFileError(f"recipe {path} not found") from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise ConfigError(f"is not readable text: {error}") from error
-    overrides = []
-    for number, line in enumerate(text.splitlines(), start=1):
-        line = line.strip()
-        if not line or line.startswith("#"):
-            continue
-        if "=" not in line:
-            raise ConfigError(f"line {number}: expected field.path=value, got {line!r}")
-        overrides.append(line)
-    return overrides
-
-
-def apply_recipe(cfg: T, recipe: Path | None, overrides: list[str]) -> T:
-    """``cfg`` with the overrides of the recipe file ``recipe`` (if any), then ``overrides``; an invalid field of the
-    recipe is a ConfigError that names the file."""
-    if recipe is not None:
-        try:
-            cfg = apply_overrides(cfg, read_recipe(recipe))
-        except ConfigError as error:
-            raise ConfigError(f"recipe {recipe}: {error}") from None
-    return apply_overrides(cfg, overrides)
-
-
-def apply_overrides(cfg: T, overrides: list[str]) -> T:
-    """Applies ``dotted.field=value`` overrides to a config dataclass (values parsed as Python literals, else strings).
-
-    A field that moved into a section (the config class's ``MOVED_FIELDS``, old name -> new path, e.g.
-    ``critic_warmup_iterations`` -> ``fine_tune.critic_warmup_iterations``) is a ConfigError naming its new path."""
-    moved = getattr(cfg, "MOVED_FIELDS", {})
-    for item in overrides:
-        if "=" not in item:
-            raise ConfigError(f"override must look like field.path=value, got {item!r}")
-        path, text = item.split("=", 1)
-        if path in moved:
-            raise ConfigError(f"{path} is now {moved[path]}: set {moved[path]}={text}")
-        target = cfg
-        keys = path.split(".")
-        for key in keys[:-1]:
-            if not hasattr(target, key) or not dataclasses.is_dataclass(getattr(target, key)):
-                raise ConfigError(f"unknown config section {path!r}")
-            target = getattr(target, key)
-        leaf = keys[-1]
-        if not dataclasses.is_dataclass(target) or leaf not in {f.name for f in dataclasses.fields(target)}:
-            raise ConfigError(f"unknown config field {path!r}")
-        try:
-            value = ast.literal_eval(text)
-        except (ValueError, SyntaxError):
-            value = text
-        current = getattr(target, leaf)
-        expected = f"of type {type(current).__name__}"
-        allowed = [type(current).__name__]
-        if current is None or value is None:  # an optional field, e.g. ``float | None``: its annotation's types
-            annotation = str(next(f.type for f in dataclasses.fields(target) if f.name == leaf))
-            allowed = [name.strip() for name in annotation.split("|")]
-            expected = annotation if current is None else expected
-        if "float" in allowed and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
-        if isinstance(current, tuple) and isinstance(value, list):
-            value = tuple(value)
-        if ("None" if value is None else type(value).__name__) not in allowed:
-            raise ConfigError(f"{path} must be {expected}, got {text!r}")
-        if isinstance(current, tuple) and current:
-            value = tuple_like(path, current, value, text)
-        setattr(target, leaf, value)
-    return cfg
-
-
-def tuple_like(path: str, current: tuple, value: tuple, text: str) -> tuple:
-    """``value`` with the element type of the default ``current`` (ints become floats in a tuple of floats); a
-    ConfigError naming ``path`` when an element has another type."""
-    kind = type(current[0])
-    if kind is float:
-        value = tuple(float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in value)
-    if not all(type(v) is kind for v in value):
-        raise ConfigError(f"{path} must be a tuple of {kind.__name__}, got {text!r}")
-    return value
-
-
-@dataclass
-class ProcessGroup:
-    """This process's place in a torchrun launch (``RANK``, ``WORLD_SIZE``); one process otherwise."""
-
-    rank: int = 0
-    world_size: int = 1
-
-    @staticmethod
-    def from_environment() -> ProcessGroup:
-        return ProcessGroup(rank=int(os.getenv("RANK", "0")), world_size=int(os.getenv("WORLD_SIZE", "1")))
-
-    def shard(self, env: PushEnvConfig | LocomotionEnvConfig) -> PushEnvConfig | LocomotionEnvConfig:
-        """This rank's environment: ``env.num_envs`` worlds in all, split evenly; a seed per rank."""
-        if env.num_envs % self.world_size:
-            raise ConfigError(f"env.num_envs ({env.num_envs}) must be divisible by the number of processes ({self.world_size})")
-        return dataclasses.replace(env, num_envs=env.num_envs // self.world_size, seed=env.seed + self.rank)
 
 
 def train(cfg: TaskTrainConfig, run_dir: Path, resume: bool = False, command: str | None = None,
@@ -376,21 +243,6 @@ def start_from(runner: CaTOnPolicyRunner, cfg: TaskTrainConfig, run_dir: Path, r
         hold_normalizer(runner.alg.actor)
 
 
-@contextlib.contextmanager
-def sigterm_as_keyboard_interrupt():
-    """Within the block SIGTERM raises KeyboardInterrupt, so a long job stopped by ``kill`` (or by a shell that
-    ignores SIGINT in background jobs) saves its progress as after Ctrl-C."""
-
-    def on_sigterm(signum, frame):
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, on_sigterm)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
 def set_action_std(actor: torch.nn.Module, std: float) -> None:
     """Sets the standard deviation of ``actor``'s Gaussian action distribution (every action) to ``std``; the
     distribution is rsl_rl's with a scalar std parameter (``rsl_rl_runner_cfg``)."""
@@ -404,41 +256,3 @@ def hold_normalizer(model: torch.nn.Module) -> None:
     model.obs_normalizer.until = 0
 
 
-FORWARDED_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)  # what stops a launcher: kill, Ctrl-C, hang-up
-
-
-def launch_processes(procs: int, argv: list[str]) -> int:
-    """Re-runs ``dynpush train`` under torchrun with ``procs`` processes on this machine; returns torchrun's exit
-    status.
-
-    torchrun runs in a session of its own, so that a stop reaches it through this process only: SIGTERM, SIGINT or
-    SIGHUP to this process (unless it ignores that signal, as under ``nohup``) is sent on to torchrun as SIGTERM,
-    which torchrun sends to the ranks, which save their last iteration boundary; this process waits for torchrun and
-    returns its (non-zero) status. Left to their defaults, a signal ended this process alone and torchrun and the
-    ranks trained on.
-    """
-    import sys
-
-    command = [sys.executable, "-m", "torch.distributed.run", "--standalone", f"--nproc_per_node={procs}",
-               "-m", "dynpush", "train", *argv]
-    torchrun = subprocess.Popen(command, start_new_session=True)
-    with forward_signals_as_sigterm(torchrun):
-        return torchrun.wait()
-
-
-@contextlib.contextmanager
-def forward_signals_as_sigterm(process: subprocess.Popen):
-    """Within the block, each of ``FORWARDED_SIGNALS`` that this process does not ignore is sent to ``process`` as
-    SIGTERM instead of acting here."""
-
-    def forward(signum, frame):
-        process.send_signal(signal.SIGTERM)
-
-    # A handler that is not Python's (None) is left alone, as are ignored signals.
-    handled = [sig for sig in FORWARDED_SIGNALS if signal.getsignal(sig) not in (signal.SIG_IGN, None)]
-    previous = {sig: signal.signal(sig, forward) for sig in handled}
-    try:
-        yield
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)

@@ -20,7 +20,7 @@ from dynpush.policies.actor import load_actor
 from dynpush.policies.locomotion_export import export_locomotion
 from dynpush.policies.locomotion_train import LocomotionTrainConfig
 from dynpush.policies.tasks import load_run_config
-from dynpush.policies.training import apply_overrides
+from dynpush.policies.overrides import apply_overrides
 from dynpush.runtime.errors import StartupError
 from dynpush.runtime.locomotion import OnnxLocomotion
 from dynpush.runtime.locomotion_contract import LocomotionContract

@@ -11,7 +11,7 @@ from dynpush.cli import main
 from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
 from dynpush.policies.schedules import ConstraintCurriculumConfig
 from dynpush.policies.train import TrainConfig
-from dynpush.policies.training import apply_overrides, apply_recipe, read_recipe
+from dynpush.policies.overrides import apply_overrides, apply_recipe, read_recipe
 from dynpush.sim.config import ConfigError
 
 ROOT = Path(__file__).resolve().parent.parent

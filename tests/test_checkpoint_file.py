@@ -10,7 +10,9 @@ import pytest
 import torch
 
 from dynpush.policies.checkpoint_file import CheckpointError, read_checkpoint
-from dynpush.policies.train import TrainConfig, apply_overrides, train
+from dynpush.policies.train import train
+
+from train_helpers import tiny
 
 PACKAGE_DIRS = ("dynpush", "policies", "sim", "runtime", "kernels", "assets_usd")
 
@@ -23,12 +25,6 @@ class RunsCode:
 
     def __reduce__(self):
         return os.system, (f"touch {self.marker}",)
-
-
-def tiny(iterations: int) -> TrainConfig:
-    return apply_overrides(TrainConfig.preset_config("cpu"), [
-        "env.num_envs=8", f"iterations={iterations}", "num_steps_per_env=6", "save_interval=1",
-        "network.actor_hidden=(32,)", "network.critic_hidden=(32,)"])
 
 
 def test_training_checkpoints_load_with_weights_only_and_resume(tmp_path):

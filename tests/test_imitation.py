@@ -9,15 +9,10 @@ import torch
 
 from dynpush.policies.fine_tune import FineTuneConfig
 from dynpush.policies.imitation import ImitationConfig, imitate
-from dynpush.policies.train import TrainConfig, apply_overrides, train
+from dynpush.policies.train import apply_overrides, train
 from dynpush.sim.config import ConfigError
 
-
-def tiny(iterations: int = 2, warmup: int = 0) -> TrainConfig:
-    cfg = TrainConfig.preset_config("cpu")
-    return apply_overrides(cfg, ["env.num_envs=8", f"iterations={iterations}", "num_steps_per_env=6", "save_interval=1",
-                                 "network.actor_hidden=(32, 32)", "network.critic_hidden=(32, 32)",
-                                 f"fine_tune.critic_warmup_iterations={warmup}"])
+from train_helpers import tiny
 
 
 def tiny_imitation(rounds: int) -> ImitationConfig:
@@ -109,7 +104,7 @@ def test_imitation_config_errors_name_the_field():
     expert = ImitationConfig(expert_object_size=0.4, expert_overrides=("push_speed=0.9", "yaw_gain=0.6")).expert()
     assert (expert.object_size, expert.push_speed, expert.yaw_gain) == (0.4, 0.9, 0.6)
     with pytest.raises(ConfigError, match="^fine_tune.critic_warmup_iterations must be an integer >= 0"):
-        tiny(warmup=-1).validate()
+        tiny(2, "fine_tune.critic_warmup_iterations=-1").validate()
 
 
 def test_critic_warmup_holds_the_actor_and_trains_the_critic(tmp_path, monkeypatch):
@@ -127,7 +122,7 @@ def test_critic_warmup_holds_the_actor_and_trains_the_critic(tmp_path, monkeypat
 
     monkeypatch.setattr(CaTPPO, "update", update)
     learning_rates = []
-    cfg = apply_overrides(tiny(iterations=3, warmup=2), ["ppo.schedule=fixed", "ppo.learning_rate=0.0002"])
+    cfg = apply_overrides(tiny(3, "fine_tune.critic_warmup_iterations=2"), ["ppo.schedule=fixed", "ppo.learning_rate=0.0002"])
     runner = train(cfg, tmp_path / "run")
     assert len(snapshots) == 3
     first, second, third = snapshots
@@ -151,7 +146,7 @@ def test_expert_regularised_ppo_stores_the_experts_labels_and_pulls_the_actor_to
     from dynpush.policies.scripted import ScriptedPusher
     from dynpush.sim.push_env import PushEnv
 
-    cfg = apply_overrides(tiny(iterations=12), ["fine_tune.imitation_weight=(50.0, 10.0)", "ppo.learning_rate=0.003"])
+    cfg = apply_overrides(tiny(12), ["fine_tune.imitation_weight=(50.0, 10.0)", "ppo.learning_rate=0.003"])
     env = cfg.make_env(cfg.env)
     assert isinstance(env, ExpertLabelledEnv)
     observations = env.get_observations()
@@ -211,7 +206,7 @@ def test_the_imitation_term_can_take_the_nominal_size_teacher_of_a_dagger_studen
 
 def test_a_new_run_starts_from_another_runs_imitation_actor_with_its_own_optimizer_and_noise(tmp_path):
     checkpoint = imitate(tiny(), tiny_imitation(1), tmp_path / "bc")
-    cfg = apply_overrides(tiny(iterations=2, warmup=2),
+    cfg = apply_overrides(tiny(2, "fine_tune.critic_warmup_iterations=2"),
                           ["ppo.learning_rate=0.0002", "ppo.schedule=fixed", "network.init_noise_std=0.07"])
     runner = train(cfg, tmp_path / "fine", init_from=checkpoint)  # the actor is held in both iterations
     saved = torch.load(checkpoint, weights_only=False)

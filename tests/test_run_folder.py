@@ -17,16 +17,12 @@ import torch.multiprocessing as mp
 
 from dynpush.cli import main
 from dynpush.policies.checkpoint_file import CheckpointError
-from dynpush.policies.train import PPOConfig, TrainConfig, apply_overrides, train
+from dynpush.policies.train import PPOConfig, apply_overrides, train
 from dynpush.sim.config import ConfigError
 
-TINY = ["env.num_envs=8", "num_steps_per_env=6", "save_interval=1", "network.actor_hidden=(32, 32)",
-        "network.critic_hidden=(32, 32)"]
+from train_helpers import TINY, tiny
+
 NO_TIME = 1e-9  # hours: spent before the first iteration ends, so a launch runs exactly one iteration
-
-
-def tiny(iterations: int, *overrides: str) -> TrainConfig:
-    return apply_overrides(TrainConfig.preset_config("cpu"), [*TINY, f"iterations={iterations}", *overrides])
 
 
 def assert_same_training(a, b) -> None:

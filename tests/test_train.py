@@ -10,11 +10,7 @@ import torch
 from dynpush.policies.train import TrainConfig, apply_overrides, train
 from dynpush.sim.config import ConfigError
 
-
-def tiny(iterations: int) -> TrainConfig:
-    cfg = TrainConfig.preset_config("cpu")
-    return apply_overrides(cfg, ["env.num_envs=8", f"iterations={iterations}", "num_steps_per_env=6",
-                                 "save_interval=1", "network.actor_hidden=(32, 32)", "network.critic_hidden=(32, 32)"])
+from train_helpers import tiny
 
 
 def actor_parameters(runner):

@@ -11,6 +11,7 @@ through :func:`table_rates`.
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -19,6 +20,7 @@ import torch
 from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
 
 from .episodes import FirstEpisodes, Policy, run_first_episodes
+from .observers import GoalErrorObserver
 from .sample_stats import percent
 
 if TYPE_CHECKING:
@@ -74,7 +76,13 @@ def table_rates(episodes: FirstEpisodes, violated_steps: np.ndarray) -> dict:
 
 
 def first_episode_rates(env: PushEnv, policy: Policy) -> dict:
-    """:func:`table_rates` of every world's first episode in ``env``, as ``eval.json`` reports them."""
+    """:func:`table_rates` of every world's first episode in ``env``, as ``eval.json`` reports them, and how the
+    episodes end (``outcome_percent``: at the goal with the rotation off, rotation right away from the goal, ...; as
+    in ``eval.json``'s ``goal_error``)."""
     constraints = ConstraintObserver(env)
-    episodes = run_first_episodes(env, policy, [constraints])
-    return table_rates(episodes, constraints.violated.cpu().numpy())
+    goal_errors = GoalErrorObserver(env, env.num_envs)
+    episodes = run_first_episodes(env, policy, [constraints, goal_errors])
+    rewards = env.cfg.rewards
+    outcome = GoalErrorObserver.summary([goal_errors], episodes, rewards.success_distance,
+                                        math.radians(rewards.success_angle_deg))["outcome_percent"]
+    return {**table_rates(episodes, constraints.violated.cpu().numpy()), "outcome_percent": outcome}

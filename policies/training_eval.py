@@ -8,7 +8,8 @@ figures). Every evaluation of a run starts the same episodes (``eval_seed``), so
 policy only. Each line of ``evaluations.jsonl``::
 
     {"iteration": K, "world_steps": ..., "training_hours": ..., "episodes": N,
-     "success_rate": %, "toppled_rate": %, "constraint_violation_percent": {group: %}}
+     "success_rate": %, "toppled_rate": %, "constraint_violation_percent": {group: %},
+     "outcome_percent": {"success": %, "toppled": %, "at_goal_rotation_off": %, ...}}
 
 ``iteration`` K: the actor after K iterations; ``world_steps``: the CaT-PPO world-steps of those K iterations (all
 processes); ``training_hours``: the training wall-clock of those iterations, summed over all launches of the run
@@ -77,6 +78,8 @@ class PeriodicEvaluation:
             f.write(json.dumps(record) + "\n")
         worst = max(rates["constraint_violation_percent"].items(), key=lambda item: item[1])
         tqdm.write(f"evaluation before it {iteration}: success {rates['success_rate']:.1f} %, toppled"
-                   f" {rates['toppled_rate']:.1f} %, most violated {worst[0]} {worst[1]:.2f} % of the time")
+                   f" {rates['toppled_rate']:.1f} %, at the goal with the rotation off"
+                   f" {rates['outcome_percent']['at_goal_rotation_off']:.1f} %, most violated {worst[0]} {worst[1]:.2f} %"
+                   " of the time")
         return record
 

@@ -183,6 +183,10 @@ def test_evaluations_during_training_leave_the_training_unchanged(tmp_path):
     assert records[0]["training_hours"] == 0.0 < records[1]["training_hours"]
     assert set(records[1]["constraint_violation_percent"]) >= {"collision", "object_balance"}
     assert all(0.0 <= r["success_rate"] <= 100.0 and 0.0 <= r["toppled_rate"] <= 100.0 for r in records)
+    for r in records:  # how the episodes ended: success and toppled as above, the failures split by goal error
+        outcome = r["outcome_percent"]
+        assert (outcome["success"], outcome["toppled"]) == (r["success_rate"], r["toppled_rate"])
+        assert 0.0 <= sum(outcome.values()) <= 100.0 + 1e-9
     progress = lines(tmp_path / "evaluated" / "progress.jsonl")
     assert [r["eval_s"] > 0.0 for r in progress] == [True, False, True, False]  # kept out of the rollout time
 
@@ -218,7 +222,8 @@ def test_curve_draws_evaluations_against_world_steps_and_hours_of_all_launches(t
     evaluation = {"episodes": 4, "constraint_violation_percent": {"collision": 1.0, "object_balance": 3.0}}
     evaluations = [{"iteration": 0, "world_steps": 0, "training_hours": 0.0, "success_rate": 0.0, "toppled_rate": 0.0},
                    {"iteration": 2, "world_steps": 96, "training_hours": 5.0 / 3600, "success_rate": 10.0, "toppled_rate": 0.0},
-                   {"iteration": 2, "world_steps": 96, "training_hours": 5.0 / 3600, "success_rate": 25.0, "toppled_rate": 5.0}]
+                   {"iteration": 2, "world_steps": 96, "training_hours": 5.0 / 3600, "success_rate": 25.0, "toppled_rate": 5.0,
+                    "outcome_percent": {"at_goal_rotation_off": 40.0}}]  # recorded from this one on
     (run / "evaluations.jsonl").write_text("".join(json.dumps({**e, **evaluation}) + "\n" for e in evaluations))
     assert [e["success_rate"] for e in read_evaluations(run)] == [0.0, 25.0]  # a repeated evaluation keeps its last
     assert main(["curve", str(run), "--out", str(tmp_path / "curve.png")]) == 0

@@ -149,6 +149,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             iteration_start = time.time()
             if any(cfg.enabled for cfg in self.success_gated_curricula()):
                 self.apply_curricula(it, fresh_run=it == 0)
+            # The snapshot follows this boundary's curricula (their episode counts taken): resumed here, they find no
+            # new episodes and hold, as they did.
             self._snapshot = {"iteration": it, **copy.deepcopy(self.training_state(next_iteration=it))}
             self.write_due_saves({k: v for k, v in self._snapshot.items() if k != "iteration"})
             if evaluating:  # after the snapshot: an interrupted evaluation loses no iteration
@@ -173,7 +175,13 @@ class CaTOnPolicyRunner(OnPolicyRunner):
             super().learn(num_learning_iterations, init_at_random_ep_len)
         except TimeBudgetSpent:
             self.stop_early()
-        if self.is_distributed:  # the launch's last checkpoint, which rank 0's save put off (every process gathers)
+            return
+        self.write_last_checkpoint()
+
+    def write_last_checkpoint(self) -> None:
+        """Writes the launch's last checkpoint where rank 0's :meth:`save` put it off (several processes: every
+        process calls this, as every process gathers)."""
+        if self.is_distributed:
             self.write_due_saves(self.training_state(next_iteration=self.current_learning_iteration + 1))
 
     def evaluate(self, iteration: int) -> float:
@@ -194,13 +202,15 @@ class CaTOnPolicyRunner(OnPolicyRunner):
     def stop_early(self) -> None:
         """Ends the launch at this iteration boundary as rsl_rl ends a run: rank 0 saves a checkpoint that ``--resume``
         continues from, and stops its writer."""
-        if self.logger.writer is None:
-            return
-        path = os.path.join(self.logger.log_dir, f"model_{self.current_learning_iteration}.pt")
-        self.save(path)
-        self.logger.stop_logging_writer()
-        print(f"time budget: stopped before iteration {self.current_learning_iteration + 1}; saved {path}; continue with"
-              " --resume")
+        writing = self.logger.writer is not None  # rank 0
+        path = os.path.join(self.logger.log_dir or ".", f"model_{self.current_learning_iteration}.pt")
+        if writing:
+            self.save(path)
+        self.write_last_checkpoint()
+        if writing:
+            self.logger.stop_logging_writer()
+            print(f"time budget: stopped before iteration {self.current_learning_iteration + 1}; saved {path}; continue"
+                  " with --resume")
 
     def set_learning_rate(self, learning_rate: float) -> None:
         """Sets PPO's learning rate (which the adaptive schedule starts from) and the optimizer's."""

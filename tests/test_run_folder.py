@@ -3,6 +3,7 @@ curve of several launches, kept checkpoints, and what a launch refuses before it
 
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -87,7 +88,6 @@ def _rank_of_a_split_run(rank: int, world_size: int, port: int, out_dir: str, na
     os.environ.update(RANK=str(rank), LOCAL_RANK=str(rank), WORLD_SIZE=str(world_size),
                       MASTER_ADDR="127.0.0.1", MASTER_PORT=str(port))
     run = Path(out_dir) / name
-    torch.manual_seed(123)  # the checkpoint's RNG state must win over whatever the new process has
     runner = train(tiny(4, "env.num_envs=16"), run, resume=(run / "config.json").exists(), hours=hours)
     torch.save({"actor": runner.alg.actor.state_dict(), "c_max": runner.alg.c_max, "env": runner.env.state_dict()},
                Path(out_dir) / f"{name}_rank{rank}.pt")
@@ -101,19 +101,26 @@ def two_ranks(tmp_path: Path, name: str, hours: float | None = None) -> None:
 
 
 def test_two_processes_resume_their_own_episodes_and_equal_the_uninterrupted_run(tmp_path):
-    two_ranks(tmp_path, "straight")
+    two_ranks(tmp_path, "straight")  # a checkpoint after every iteration, written at the next boundary
     two_ranks(tmp_path, "split", hours=NO_TIME)  # stops after iteration 0
     saved = torch.load(tmp_path / "split" / "model_0.pt", weights_only=False)
     assert saved["iter"] == 1 and len(saved["infos"]["other_processes"]) == 1  # rank 1's episodes and RNG too
     two_ranks(tmp_path, "split")
-    for rank in range(2):
-        straight = torch.load(tmp_path / f"straight_rank{rank}.pt", weights_only=False)
-        split = torch.load(tmp_path / f"split_rank{rank}.pt", weights_only=False)
-        for name, value in straight["actor"].items():
-            assert torch.equal(value, split["actor"][name]), f"rank {rank}: actor.{name}"
-        assert torch.equal(straight["c_max"], split["c_max"])
-        for name, value in straight["env"].items():
-            assert np.array_equal(value, split["env"][name]), f"rank {rank}: environment state {name}"
+    # Resumed from a periodic checkpoint of the uninterrupted run, its iterations 2 and 3 again.
+    shutil.copytree(tmp_path / "straight", tmp_path / "periodic")
+    for later in ("model_2.pt", "model_3.pt"):
+        (tmp_path / "periodic" / later).unlink()
+    assert torch.load(tmp_path / "periodic" / "model_1.pt", weights_only=False)["iter"] == 2
+    two_ranks(tmp_path, "periodic")
+    for run in ("split", "periodic"):
+        for rank in range(2):
+            straight = torch.load(tmp_path / f"straight_rank{rank}.pt", weights_only=False)
+            resumed = torch.load(tmp_path / f"{run}_rank{rank}.pt", weights_only=False)
+            for name, value in straight["actor"].items():
+                assert torch.equal(value, resumed["actor"][name]), f"{run}, rank {rank}: actor.{name}"
+            assert torch.equal(straight["c_max"], resumed["c_max"])
+            for name, value in straight["env"].items():
+                assert np.array_equal(value, resumed["env"][name]), f"{run}, rank {rank}: environment state {name}"
 
 
 # ---------------------------------------------------------------------------------------------- launcher signals

@@ -5,8 +5,8 @@ its ``process_env_step`` and adds its statistics to the extras that rsl_rl's log
 (``CaT/mean_delta``, ``CaT/violation_rate/<group>``, ``CaT/delta/<group>``). This runner builds CaT-PPO and, at the
 start of every iteration, applies the ``p_max`` curricula and the reach-reward weight
 (:mod:`dynpush.policies.schedules`) and keeps a snapshot of the training state, so that an interrupted run saves the
-last iteration boundary. Checkpoints also hold the environment's state and the RNG state, so a resumed run continues
-exactly as an uninterrupted one. At an iteration boundary it also evaluates the actor when an evaluation is due
+last iteration boundary. Checkpoints also hold every process's environment state and RNG state, so a resumed run
+continues exactly as an uninterrupted one. At an iteration boundary it also evaluates the actor when an evaluation is due
 (``evaluation``), and a launch with a :class:`TimeBudget` ends there, with a checkpoint, when the next iteration would
 not end in time.
 """
@@ -416,8 +416,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         several processes that saved rank 0's only) every process starts fresh episodes at the saved goal difficulty,
         with its own seed, and the curricula count only episodes that end one episode length after ``next_iteration``:
         fresh episodes all start at once and end together."""
-        own = {"env_state": infos["env_state"], "torch_rng": infos.get("torch_rng")}
-        states = [own, *infos.get("other_processes", ())]
+        rank_0 = {"env_state": infos["env_state"], "torch_rng": infos.get("torch_rng")}
+        states = [rank_0, *infos.get("other_processes", ())]
         world_size, rank = (self.gpu_world_size, self.gpu_global_rank) if self.is_distributed else (1, 0)
         if len(states) != world_size:
             mismatch = f"saved by {len(states)} process(es), resumed by {world_size}"

@@ -151,8 +151,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
                 self.apply_curricula(it, fresh_run=it == 0)
             # The snapshot follows this boundary's curricula (their episode counts taken): resumed here, they find no
             # new episodes and hold, as they did.
-            self._snapshot = {"iteration": it, **copy.deepcopy(self.training_state(next_iteration=it))}
-            self.write_due_saves({k: v for k, v in self._snapshot.items() if k != "iteration"})
+            self._snapshot = copy.deepcopy(self.training_state(next_iteration=it))
+            self.write_due_saves(self._snapshot)
             if evaluating:  # after the snapshot: an interrupted evaluation loses no iteration
                 seconds = self.evaluate(it)
                 iteration_start += seconds
@@ -369,9 +369,8 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         """Save the snapshot of the last iteration boundary (the interrupted iteration is re-run on resume)."""
         if self._snapshot is None:
             raise RuntimeError("nothing to save: training had not started")
-        path = os.path.join(self.logger.log_dir or ".", f"model_{self._snapshot['iteration']}.pt")
-        state = {k: v for k, v in self._snapshot.items() if k != "iteration"}
-        save_checkpoint(state, Path(path), self.keep_checkpoints)
+        path = os.path.join(self.logger.log_dir or ".", f"model_{self._snapshot['iter']}.pt")
+        save_checkpoint(self._snapshot, Path(path), self.keep_checkpoints)
         return path
 
     def _configure_multi_gpu(self) -> None:

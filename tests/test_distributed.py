@@ -1,22 +1,15 @@
 """Two-process gloo training on the CPU (torch.distributed, as torchrun launches it)."""
 
 import json
-import os
-import socket
 
 import torch
 import torch.multiprocessing as mp
 
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from train_helpers import free_tcp_port, join_as_rank
 
 
 def _rank_main(rank: int, world_size: int, port: int, out_dir: str) -> None:
-    os.environ.update(RANK=str(rank), LOCAL_RANK=str(rank), WORLD_SIZE=str(world_size),
-                      MASTER_ADDR="127.0.0.1", MASTER_PORT=str(port))
+    join_as_rank(rank, world_size, port)
     from pathlib import Path
 
     from dynpush.policies.cat_ppo import CaTPPO
@@ -43,7 +36,7 @@ def _rank_main(rank: int, world_size: int, port: int, out_dir: str) -> None:
 
 
 def test_two_gloo_ranks_keep_identical_policies(tmp_path):
-    mp.spawn(_rank_main, args=(2, _free_port(), str(tmp_path)), nprocs=2, join=True)
+    mp.spawn(_rank_main, args=(2, free_tcp_port(), str(tmp_path)), nprocs=2, join=True)
     ranks = [json.loads((tmp_path / f"rank{r}.json").read_text()) for r in range(2)]
     assert [r["num_envs"] for r in ranks] == [8, 8]  # 16 worlds split over two shards
     assert all(r["group_destroyed"] for r in ranks), "train() ends the process group (gloo's threads stop before exit)"

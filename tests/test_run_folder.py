@@ -5,7 +5,6 @@ import json
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -21,7 +20,7 @@ from dynpush.policies.checkpoint_file import CheckpointError
 from dynpush.policies.train import PPOConfig, apply_overrides, train
 from dynpush.sim.config import ConfigError
 
-from train_helpers import TINY, tiny
+from train_helpers import TINY, free_tcp_port, join_as_rank, tiny
 
 NO_TIME = 1e-9  # hours: spent before the first iteration ends, so a launch runs exactly one iteration
 
@@ -67,26 +66,21 @@ def test_time_budget_counts_the_evaluation_due_before_the_next_iteration():
 
 
 def _rank_with_own_budget(rank: int, world_size: int, port: int, out_dir: str) -> None:
-    os.environ.update(RANK=str(rank), LOCAL_RANK=str(rank), WORLD_SIZE=str(world_size),
-                      MASTER_ADDR="127.0.0.1", MASTER_PORT=str(port))
+    join_as_rank(rank, world_size, port)
     cfg = apply_overrides(tiny(5), ["env.num_envs=16"])
     runner = train(cfg, Path(out_dir) / "run", hours=NO_TIME if rank == 0 else 1000.0)  # rank 0's clock decides
     Path(out_dir, f"rank{rank}.json").write_text(json.dumps({"iteration": runner.current_learning_iteration}))
 
 
 def test_all_ranks_stop_at_the_boundary_rank_0_chooses(tmp_path):
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    mp.spawn(_rank_with_own_budget, args=(2, port, str(tmp_path)), nprocs=2, join=True)
+    mp.spawn(_rank_with_own_budget, args=(2, free_tcp_port(), str(tmp_path)), nprocs=2, join=True)
     assert [json.loads((tmp_path / f"rank{r}.json").read_text())["iteration"] for r in range(2)] == [0, 0]
     assert sorted(p.name for p in (tmp_path / "run").glob("model_*.pt")) == ["model_0.pt"]
     assert torch.load(tmp_path / "run" / "model_0.pt", weights_only=False)["iter"] == 1
 
 
 def _rank_of_a_split_run(rank: int, world_size: int, port: int, out_dir: str, name: str, hours: float | None) -> None:
-    os.environ.update(RANK=str(rank), LOCAL_RANK=str(rank), WORLD_SIZE=str(world_size),
-                      MASTER_ADDR="127.0.0.1", MASTER_PORT=str(port))
+    join_as_rank(rank, world_size, port)
     run = Path(out_dir) / name
     runner = train(tiny(4, "env.num_envs=16"), run, resume=(run / "config.json").exists(), hours=hours)
     torch.save({"actor": runner.alg.actor.state_dict(), "c_max": runner.alg.c_max, "env": runner.env.state_dict()},
@@ -94,10 +88,7 @@ def _rank_of_a_split_run(rank: int, world_size: int, port: int, out_dir: str, na
 
 
 def two_ranks(tmp_path: Path, name: str, hours: float | None = None) -> None:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    mp.spawn(_rank_of_a_split_run, args=(2, port, str(tmp_path), name, hours), nprocs=2, join=True)
+    mp.spawn(_rank_of_a_split_run, args=(2, free_tcp_port(), str(tmp_path), name, hours), nprocs=2, join=True)
 
 
 def test_two_processes_resume_their_own_episodes_and_equal_the_uninterrupted_run(tmp_path):

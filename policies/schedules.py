@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from dynpush.kernels.push.constraints import CONSTRAINT_GROUPS
-from dynpush.sim.config import ConfigError
+from dynpush.sim.config import ConfigError, RewardConfig
 
 
 def _paper_p_max() -> dict[str, tuple[float, float]]:
@@ -55,8 +55,8 @@ class ConstraintCurriculumConfig:
 class ReachWeightConfig:
     """Step schedule of the reach-reward weight ``w2``."""
 
-    weight: float = 1.25
-    """Initial weight ``w2`` (Sec. "Rewards & constraints")."""
+    weight: float = field(default_factory=lambda: RewardConfig().reach_weight)
+    """Initial weight ``w2``: a training run's ``env.rewards.reach_weight`` (``TrainConfig.runner_cfg`` passes it)."""
 
     divisor: float = 4.0
     """``w2`` is divided by this factor after the switch (Sec. "Rewards & constraints")."""

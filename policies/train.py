@@ -177,6 +177,8 @@ class TrainConfig:
                                           **{name: tuple(pair) for name, pair in self.p_max_overrides.items()},
                                           **{name: (0.0, 0.0) for name in self.disabled_constraint_groups}},
                                 "follow_curricula": self.p_max_follows_curricula},
+                # The schedule starts from the environment's w2, so that env.rewards.reach_weight is the weight trained.
+                "reach": {"weight": self.env.rewards.reach_weight},
             },
             "curriculum": dataclasses.asdict(self.curriculum),
             "mass_curriculum": dataclasses.asdict(self.mass_curriculum),

@@ -5,9 +5,11 @@ import pytest
 import torch
 
 from dynpush.policies.locomotion_train import LocomotionTrainConfig
+from dynpush.policies.overrides import apply_overrides
 from dynpush.policies.schedules import (CONSTRAINT_GROUPS, DisturbanceRampConfig, ScheduleConfig, disturbance_scale_at,
                                         p_max_at, p_max_at_progress, reach_weight_at)
 from dynpush.sim.config import ConfigError
+from dynpush.policies.train import TrainConfig
 
 torch.set_num_threads(1)
 
@@ -136,3 +138,13 @@ def test_disturbance_ramp_in_the_locomotion_config():
     assert cfg.env.randomization.ee_force_max > 0.0 and old.env.randomization.ee_force_max == 0.0, \
         "runs from before the end-effector forces had none"
     assert "ee_force_max" not in old_run["env"]["randomization"]
+
+
+def test_the_trained_reach_weight_is_the_environments():
+    """The runner's schedule starts from ``env.rewards.reach_weight``, not from a default of its own."""
+    cfg = apply_overrides(TrainConfig(), ["env.rewards.reach_weight=0.0", "iterations=100"])
+    schedule = ScheduleConfig.from_dict(cfg.runner_cfg()["schedule"])
+    assert [reach_weight_at(it, 100, schedule) for it in (0, 99)] == [0.0, 0.0]
+    cfg = apply_overrides(TrainConfig(), ["env.rewards.reach_weight=2.0", "iterations=20000"])
+    schedule = ScheduleConfig.from_dict(cfg.runner_cfg()["schedule"])
+    assert [reach_weight_at(it, 20000, schedule) for it in (1499, 1500)] == [2.0, 0.5]

@@ -8,8 +8,8 @@ from dynpush.policies.locomotion_train import LocomotionTrainConfig
 from dynpush.policies.overrides import apply_overrides
 from dynpush.policies.schedules import (CONSTRAINT_GROUPS, DisturbanceRampConfig, ScheduleConfig, disturbance_scale_at,
                                         p_max_at, p_max_at_progress, reach_weight_at)
-from dynpush.sim.config import ConfigError
 from dynpush.policies.train import TrainConfig
+from dynpush.sim.config import ConfigError
 
 torch.set_num_threads(1)
 

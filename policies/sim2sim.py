@@ -68,6 +68,7 @@ from dynpush.runtime.udp import UdpEndpoint
 
 from dynpush.sim.envs import make_push_env
 
+from .chain_record import StepRecorder
 from .env_probe import EnvProbe
 from .onnx_policy import OnnxPolicy
 from .play import TrajectoryObserver, concatenate_episodes, episode_row, episode_setup, plot_play
@@ -121,6 +122,7 @@ class SimToSimConfig:
     overrides: list[str] = field(default_factory=list)  # env.field=value
     command_timeout_s: float = 10.0  # lock-step: give up when the runtime is silent this long
     trajectory_png: str | None = None  # top-down picture of the episodes (dynpush.policies.play.plot_play)
+    record: str | None = None  # .npz of what the simulator saw, step by step (dynpush.policies.chain_record)
 
 
 def check_contract_matches_env(contract: PolicyContract, env) -> None:
@@ -175,6 +177,8 @@ class SimRobot:
         self.step = 0
         self._seq = 0
         self.clock = ClockReporter(emit)  # real time only: lock-step waits for commands, not deadlines
+        meta = {"policy": cfg.policy, "seed": cfg.seed, "overrides": list(cfg.overrides)}
+        self.recorder = StepRecorder(self.env, self.probe, meta) if cfg.record else None
 
     # ------------------------------------------------------------------ commands in
     def receive_commands(self) -> None:
@@ -254,6 +258,8 @@ class SimRobot:
 
     def _start_episode_record(self) -> tuple[TrajectoryObserver | None, dict]:
         """At an episode's start: its object and goal, and a path recorder when a picture is asked for."""
+        if self.recorder is not None:
+            self.recorder.episode_started()
         return (TrajectoryObserver(self.env) if self.cfg.trajectory_png else None), episode_setup(self.env, 0)
 
     def serve(self) -> None:
@@ -269,7 +275,11 @@ class SimRobot:
             self.receive_commands()
             if self.command is not None and self.command.state == State.STOPPED:
                 break  # latched until the runtime restarts: the remaining episodes cannot run
+            if self.recorder is not None:
+                self.recorder.before_step(self.step)
             env.step_commands(*self.commands())
+            if self.recorder is not None:
+                self.recorder.after_commands()
             self.step += 1
             if started:
                 episode_steps += 1
@@ -304,6 +314,8 @@ class SimRobot:
               "trajectory_png": self.cfg.trajectory_png if paths else None})
 
     def close(self) -> None:
+        if self.recorder is not None:
+            self.recorder.write(self.cfg.record)
         self.endpoint.close()
 
 

@@ -69,8 +69,8 @@ def _sim2sim(args: argparse.Namespace) -> int:
     options = SimToSimOptions(policy=args.policy, episodes=args.episodes, mocap_noise_m=args.mocap_noise,
                               mocap_noise_rad=args.mocap_noise_rad, latency_s=args.latency, drop=args.drop,
                               lockstep=args.lockstep, seed=args.seed, config=args.config, overrides=args.set or [],
-                              log_dir=args.log_dir, trajectory_png=args.png, locomotion_policy=_locomotion_policy(args),
-                              on_slow=args.on_slow, min_rate=args.min_rate)
+                              log_dir=args.log_dir, trajectory_png=args.png, record=args.record,
+                              locomotion_policy=_locomotion_policy(args), on_slow=args.on_slow, min_rate=args.min_rate)
     report = run_sim2sim(options)
     text = json.dumps(report, indent=1)
     if args.out:
@@ -172,6 +172,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--log-dir", default="runs/sim2sim", help="folder of the runtime's tick log")
     p.add_argument("--out", default=None, help="also write the report to this JSON file")
     p.add_argument("--png", default=None, help="top-down picture of the episodes' paths (as dynpush play draws them)")
+    p.add_argument("--record", default=None, metavar="NPZ",
+                   help="the simulator writes what it saw per step (its own observations, poses, each episode's start"
+                        " state) to this file, for benchmarks/chain_side_by_side.py")
     _realtime_arguments(p)
     _locomotion_arguments(p)
     p.set_defaults(func=_sim2sim)

@@ -65,6 +65,7 @@ class SimToSimOptions:
     overrides: list[str] = field(default_factory=list)  # simulator environment overrides, env.field=value
     log_dir: str = "runs/sim2sim"
     trajectory_png: str | None = None  # the simulator draws the episodes' paths here
+    record: str | None = None  # the simulator writes what it saw, step by step, to this .npz (dynpush.policies.chain_record)
     locomotion_policy: str | None = None  # locomotion.onnx: the runtime runs it, the simulator is legged
     on_slow: str = "lockstep"  # real time, the simulator falls behind: rerun in lock-step, or stop
     min_rate: float = 0.9  # real time needs the simulator to step this fraction of the control periods...
@@ -84,6 +85,10 @@ class SimToSimOptions:
                 raise RuntimeConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
         if not 0.0 <= self.drop < 1.0:
             raise RuntimeConfigError(f"drop must lie in [0, 1), got {self.drop}")
+        for name in ("trajectory_png", "record"):
+            path = getattr(self, name)
+            if path and not Path(path).resolve().parent.is_dir():
+                raise RuntimeConfigError(f"{name}: folder {Path(path).resolve().parent} does not exist")
 
 
 def runtime_config(options: SimToSimOptions) -> RuntimeConfig:
@@ -120,6 +125,7 @@ def _simulator_config(options: SimToSimOptions, runtime: Runtime) -> dict:
         "object_body": mocap.object_body,
         "overrides": list(options.overrides) + (["env.legged.enabled=True"] if options.locomotion_policy else []),
         "trajectory_png": str(Path(options.trajectory_png).resolve()) if options.trajectory_png else None,
+        "record": str(Path(options.record).resolve()) if options.record else None,
     }
 
 

@@ -1,0 +1,145 @@
+"""The runtime's chain beside the simulation: the same episodes, the same states, the same observations.
+
+A sim-to-sim record (``dynpush sim2sim --record``, :mod:`dynpush.policies.chain_record`) holds each episode's start
+state and, per step, what the simulator's own kernels compute from the state the runtime acted on. Two comparisons:
+
+- :func:`compare_observations`: the runtime's tick log against the record, term by term. The runtime's numpy builders
+  are tested equal to the kernels on random states; here they meet the states of a real run, the command the runtime
+  sent (its safety layer clips the base command to its limits) and the runtime's own action history, where the
+  simulator only sees a policy at rest.
+- :func:`replay_in_simulation`: each recorded episode again from its start state, with the push policy (and, legged,
+  the locomotion policy) run inside the environment as ``dynpush eval`` runs them: the in-simulation outcome and base
+  path beside the chain's. A difference in outcome on the same episode is a defect of the chain or of the sim-to-sim
+  set-up (timing, action history), not of the policies.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import torch
+
+from dynpush.runtime.contract import PolicyContract
+from dynpush.runtime.locomotion_layout import LOCOMOTION_TERMS
+from dynpush.runtime.observation import POLICY_OBSERVATION_LAYOUT
+from dynpush.runtime.safety import State
+from dynpush.runtime.tick_log import TickLog
+from dynpush.sim.envs import make_push_env
+
+from .chain_record import ChainRecord
+from .env_probe import EnvProbe
+from .onnx_policy import OnnxPolicy
+from .trained_env import env_config_for
+
+
+def _term_differences(logged: np.ndarray, simulated: np.ndarray, terms) -> dict[str, dict[str, float]]:
+    """Per term: the largest and the median absolute difference over the rows."""
+    out, k = {}, 0
+    for name, size in terms:
+        d = np.abs(logged[:, k:k + size] - simulated[:, k:k + size])
+        out[name] = {"max": float(d.max()), "median": float(np.median(d))} if len(d) else {"max": None, "median": None}
+        k += size
+    return out
+
+
+def compare_observations(record: ChainRecord, log: TickLog) -> dict:
+    """The runtime's push (and locomotion) observations of each tick against the kernels' of the same state.
+
+    Tick ``k`` of the runtime acted on the state the simulator recorded before its step ``k`` (lock-step, or real time
+    without skipped deadlines); ``alignment_error_m`` (the largest distance between the runtime's mocap base position
+    and the recorded one at the same index, no mocap noise) says whether that pairing holds. Rows: ticks with a
+    runtime observation during a recorded episode.
+    """
+    steps = record.rows["step"]
+    ticks = log.column("tick")[:, 0].astype(np.int64)
+    by_tick = {int(t): i for i, t in enumerate(ticks)}
+    pairs = np.array([(by_tick[int(s)], i) for i, s in enumerate(steps) if int(s) in by_tick], dtype=np.int64)
+    log_rows, rec_rows = pairs[:, 0], pairs[:, 1]
+    alignment = np.linalg.norm(log.column("base_position")[log_rows] - record.rows["base_pose"][rec_rows, :3], axis=1)
+    obs = log.column("obs")[log_rows]
+    keep = np.isfinite(obs).all(axis=1) & (record.rows["episode"][rec_rows] >= 0)
+    result = {"ticks_compared": int(keep.sum()), "alignment_error_m": float(alignment.max()) if len(alignment) else None,
+              "push_observation": _term_differences(obs[keep], record.rows["policy_obs"][rec_rows][keep],
+                                                    POLICY_OBSERVATION_LAYOUT)}
+    if "locomotion_obs" in record.rows:
+        result["locomotion_observation"] = _term_differences(
+            log.column("locomotion_obs")[log_rows][keep], record.rows["locomotion_obs"][rec_rows][keep],
+            tuple(LOCOMOTION_TERMS.items()))
+    return result
+
+
+def _with_runtime_history(start: dict[str, np.ndarray], log: TickLog, tick: int) -> dict[str, np.ndarray]:
+    """``start`` with the action history the runtime had at ``tick`` (its observations' previous actions), where the
+    simulator's commands left the environment's own at rest: the same controller memory on both sides."""
+    start = dict(start)
+    row = int(np.flatnonzero(log.column("tick")[:, 0] == tick)[0])
+    k = sum(size for name, size in POLICY_OBSERVATION_LAYOUT if name != "last_actions")
+    last_actions = log.column("obs")[row, k:].astype(np.float32)
+    start["task.actions"] = start["task.actions"].copy()
+    start["task.actions"][0] = last_actions
+    start["policy_obs"] = start["policy_obs"].copy()
+    start["policy_obs"][0, k:] = last_actions
+    if "leg_task.actions" in start:
+        j = list(LOCOMOTION_TERMS).index("last_leg_actions")
+        j0 = sum(list(LOCOMOTION_TERMS.values())[:j])
+        start["leg_task.actions"] = start["leg_task.actions"].copy()
+        start["leg_task.actions"][0] = log.column("locomotion_obs")[row, j0:j0 + LOCOMOTION_TERMS["last_leg_actions"]]
+    return start
+
+
+def safety_clamps(log: TickLog, contract: PolicyContract, leg_action_scale: float | None = None,
+                  leg_default: np.ndarray | None = None) -> dict[str, float]:
+    """Share of the PUSH ticks at which the runtime's safety layer sent other targets than the policies asked for
+    (``CommandLimits.clamp``: base command, arm and leg joint ranges), per block. The simulation applies what the
+    policies ask for; a clamped tick is one the robot (and sim-to-sim) sees differently."""
+    push = log.column("state")[:, 0] == State.PUSH
+    mapping = contract.action_mapping()
+    base, arm = mapping.commands(mapping.clipped(log.column("actions")[push]))
+    shares = {"base_command": base, "arm_targets": arm}
+    if leg_action_scale is not None:
+        clipped = np.clip(log.column("locomotion_actions")[push], -contract.action_clip, contract.action_clip)
+        shares["leg_targets"] = leg_default + leg_action_scale * clipped
+    return {name: float((np.abs(wanted - log.column(name)[push]).max(axis=1) > 1e-6).mean()) if push.any() else 0.0
+            for name, wanted in shares.items()}
+
+
+def replay_in_simulation(record: ChainRecord, policy_path: str, locomotion_policy: str | None,
+                         log: TickLog | None = None) -> list[dict]:
+    """Every recorded episode from its start state, with the policies inside the environment (observation noise off,
+    the record's seed and overrides, so that the base pushes fall at the same steps). With the runtime's tick ``log``
+    each episode also starts with the runtime's action history (push and locomotion), else with the environment's
+    (none, as ``dynpush eval``'s episodes start). Per episode: the outcome as sim-to-sim reports it and the base
+    position [m] (world) before every step, ``(steps, 3)``."""
+    meta = json.loads(str(record.rows["meta"]))
+    policy = OnnxPolicy(policy_path)
+    overrides = list(meta["overrides"])
+    if locomotion_policy:
+        overrides.append(f"env.legged.locomotion_policy={locomotion_policy}")
+    env = make_push_env(env_config_for(policy, 1, noise=False, seed=meta["seed"], overrides=overrides))
+    probe = EnvProbe(env)
+    episodes = []
+    for i, start in enumerate(record.starts):
+        if log is not None:
+            start = _with_runtime_history(start, log, int(record.episode_rows("step", i)[0]))
+        env.load_state_dict(start)
+        base, steps = [], 0
+        while True:
+            base.append(probe.base()[0, :3].copy())
+            env.step(torch.from_numpy(policy(env.policy_obs_t.numpy().copy())))
+            steps += 1
+            if int(env.reset_t[0]):
+                break
+        timed_out, toppled = bool(env.time_out_t[0]), bool(env.episode_toppled_t[0])
+        episodes.append({"success": int(env.episode_success_t[0]) == 1, "toppled": toppled, "steps": steps,
+                         "fallen": not (timed_out or toppled), "base_position": np.array(base)})
+    return episodes
+
+
+def path_divergence(chain: np.ndarray, simulated: np.ndarray, thresholds_m=(0.01, 0.05, 0.2)) -> dict:
+    """How far the chain's base path (steps, 3) [m] runs from the simulation's over their common steps: the first step
+    beyond each threshold (None: never) and the largest distance."""
+    n = min(len(chain), len(simulated))
+    distance = np.linalg.norm(chain[:n] - simulated[:n], axis=1)
+    first = {f"{t:g}": (int(np.argmax(distance > t)) if (distance > t).any() else None) for t in thresholds_m}
+    return {"common_steps": n, "max_m": float(distance.max()) if n else None, "first_step_beyond_m": first}

@@ -79,6 +79,9 @@ class Controller:
         self._ramp_start = 0.0
         self._ramp_done = False
         self._seq = 0
+        # The goal's height [m]: the object's when the goal arrived, its centroid's height at rest, as the training's
+        # goal is (half the object's height), so that a tilting object moves off its goal in z as it did in training.
+        self._goal_height: float | None = None
         self.mocap_age = math.inf  # of the latest tick [s]
         locomotion_inputs = locomotion.model.input.shape[1] if locomotion else 0
         self.layout = RecordLayout(record_columns(self._leg_joints, locomotion_inputs))
@@ -89,13 +92,15 @@ class Controller:
         """The 54-d observation, written into the push policy's input buffer."""
         s = robot.state
         R_b = base.pose.rotation
+        if self._goal_height is None:
+            self._goal_height = float(obj.pose.position[2])
         self.push.input[0] = policy_observation(
             base_position=base.pose.position, base_quat=base.pose.quat_xyzw,
             base_linear_velocity_w=R_b @ s.base_linear_velocity_b, base_angular_velocity_w=R_b @ s.base_angular_velocity_b,
             object_position=obj.pose.position, object_quat=obj.pose.quat_xyzw,
             ee_position=base.pose.position + R_b @ s.ee_position_b,
             arm_joint_position=s.arm_q, arm_joint_velocity=s.arm_qd, arm_default=self._arm_default,
-            goal_position=(goal.x, goal.y, obj.pose.position[2]), goal_quat=yaw_quat(goal.yaw),
+            goal_position=(goal.x, goal.y, self._goal_height), goal_quat=yaw_quat(goal.yaw),
             last_actions=self._last_actions,
         )
         return self.push.input[0]
@@ -115,6 +120,8 @@ class Controller:
         self.mocap_age = max(base_age, object_age)
         fresh = self.mocap_age <= self._mocap_timeout_s
         self.record.fill(np.nan)
+        if goal_changed:
+            self._goal_height = None  # taken at the next observation
         finite, tilt, actions = self._measure(base, obj, robot, goal if fresh else None)
 
         previous = self.safety.state

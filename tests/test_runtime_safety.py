@@ -130,6 +130,20 @@ def test_ramp_moves_the_arm_linearly_to_default(tmp_path):
         assert commands[k].mode == MODE_TARGETS
 
 
+def test_the_goal_height_is_the_objects_when_the_goal_arrived(tmp_path):
+    """Training puts the goal at the object's resting centroid height (half its height); the runtime, which does not
+    know the object, takes its measured height when the goal arrives, so a tilting object moves off its goal in z."""
+    ticks = Ticks(controller(tmp_path))
+    object_to_goal_b = slice(31, 34)  # runtime.observation.POLICY_OBSERVATION_LAYOUT; the base frame is the world's here
+    ticks()
+    np.testing.assert_allclose(ticks.ctrl.push.input[0, object_to_goal_b], [1.0, 0.0, 0.0], atol=1e-6)
+    ticks.object[2] = 0.45  # the object tilts: its centroid rises
+    ticks()
+    np.testing.assert_allclose(ticks.ctrl.push.input[0, object_to_goal_b], [1.0, 0.0, -0.1], atol=1e-6)
+    ticks(goal_changed=True)  # a new goal is taken at the height the object has now
+    np.testing.assert_allclose(ticks.ctrl.push.input[0, object_to_goal_b], [1.0, 0.0, 0.0], atol=1e-6)
+
+
 def test_push_commands_are_clamped_to_limits(tmp_path):
     huge = np.array([50.0, -50.0, 50.0, -50.0, 50.0, 50.0, 50.0, -50.0, 50.0, -50.0, 50.0])
     lower, upper = [-1.0, -1.0, 0.5, -1.0, -1.0], [1.0, 0.4, 1.5, 1.0, 1.0]  # within the contract's

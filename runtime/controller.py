@@ -7,7 +7,8 @@ Measurements enter the push policy's observation (observation.py) as follows: ba
 poses from mocap; base twist from the robot's state estimator (base frame, rotated into the world
 with the mocap base orientation, which the observation builder rotates back); end-effector position
 from the robot's arm forward kinematics (base frame, placed in the world with the mocap base pose);
-goal height equal to the object's measured height (planar task). Actions become commands as in
+goal height equal to the object's measured height when the goal arrived (planar task; training's goal is at
+the object's resting centroid height). Actions become commands as in
 training, by the contract's action mapping (actions.py): ``u_base = default + scale * a[0:6]``,
 ``q_arm = default + arm_scale * a[6:11]``, with ``a`` clipped to ``+-action_clip``. Every command is
 clamped to its limits and checked before it leaves: one with a non-finite value (or beyond a limit)

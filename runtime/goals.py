@@ -1,7 +1,7 @@
 """The object goal: from the config's sequence, advanced after success, or set by ``DPG1`` commands.
 
 A goal is (x, y) [m] and yaw [rad] of the object centroid frame in the runtime's world (Z-up). The
-task is planar: the goal's height is taken equal to the object's measured height each tick. Goal
+task is planar: the goal's height is the object's measured height when the goal arrived (the controller). Goal
 commands come only from ``goals.allowed_senders`` (trust.py); a goal outside ``goals.workspace`` or with
 a non-finite yaw is refused, counted and logged with the reason, and the current goal stays.
 """

@@ -23,6 +23,8 @@ with the runtime's own datagrams (``dynpush.runtime.packets``):
   targets go to the leg drives as they are (the base command is then only the push policy's, which the
   environment ignores); before the first command, or without leg targets, the legs hold their default.
 - **goals out** (``DPG1``): the episode's goal when it starts.
+- **record** (``record``, optional): per step, the environment's own observations of the state the runtime acts on,
+  the poses and each episode's start state, written when the run ends (``chain_record.py``).
 
 Episodes: the environment the policy was trained in (``policies.trained_env.env_config_for``: the
 training config of the policy's metadata, one world, observation noise off, ``env.field=value``

@@ -24,8 +24,6 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
-
 
 def side_by_side(policy: str, locomotion_policy: str | None, seed: int, episodes: int, overrides: list[str],
                  out: Path) -> dict:
@@ -44,9 +42,8 @@ def side_by_side(policy: str, locomotion_policy: str | None, seed: int, episodes
     record = read_record(record_path)
     log = read_log(report["runtime"]["log"])
     observations = compare_observations(record, log)
-    legs = LocomotionContract.read(locomotion_policy) if locomotion_policy else None
-    clamps = safety_clamps(log, OnnxPolicy(policy).contract, legs and legs.action_scale,
-                           legs and np.asarray(legs.default_joint_positions))
+    clamps = safety_clamps(log, OnnxPolicy(policy).contract,
+                           LocomotionContract.read(locomotion_policy) if locomotion_policy else None)
     simulated = replay_in_simulation(record, policy, locomotion_policy, log)
     rows = []
     for i, sim in enumerate(simulated):

@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from dynpush.runtime.contract import PolicyContract
+from dynpush.runtime.locomotion_contract import LocomotionContract
 from dynpush.runtime.locomotion_layout import LOCOMOTION_TERMS
 from dynpush.runtime.observation import POLICY_OBSERVATION_LAYOUT
 from dynpush.runtime.safety import State
@@ -69,27 +70,34 @@ def compare_observations(record: ChainRecord, log: TickLog) -> dict:
     return result
 
 
+def _term_columns(terms, name: str) -> slice:
+    """The columns of term ``name`` in an observation laid out as ``terms`` ((name, size) pairs)."""
+    start = 0
+    for term, size in terms:
+        if term == name:
+            return slice(start, start + size)
+        start += size
+    raise KeyError(name)
+
+
 def _with_runtime_history(start: dict[str, np.ndarray], log: TickLog, tick: int) -> dict[str, np.ndarray]:
     """``start`` with the action history the runtime had at ``tick`` (its observations' previous actions), where the
     simulator's commands left the environment's own at rest: the same controller memory on both sides."""
     start = dict(start)
     row = int(np.flatnonzero(log.column("tick")[:, 0] == tick)[0])
-    k = sum(size for name, size in POLICY_OBSERVATION_LAYOUT if name != "last_actions")
-    last_actions = log.column("obs")[row, k:].astype(np.float32)
-    start["task.actions"] = start["task.actions"].copy()
-    start["task.actions"][0] = last_actions
-    start["policy_obs"] = start["policy_obs"].copy()
-    start["policy_obs"][0, k:] = last_actions
+    columns = _term_columns(POLICY_OBSERVATION_LAYOUT, "last_actions")
+    last_actions = log.column("obs")[row, columns]
+    start["task.actions"], start["policy_obs"] = start["task.actions"].copy(), start["policy_obs"].copy()
+    start["task.actions"][0] = start["policy_obs"][0, columns] = last_actions
     if "leg_task.actions" in start:
-        j = list(LOCOMOTION_TERMS).index("last_leg_actions")
-        j0 = sum(list(LOCOMOTION_TERMS.values())[:j])
         start["leg_task.actions"] = start["leg_task.actions"].copy()
-        start["leg_task.actions"][0] = log.column("locomotion_obs")[row, j0:j0 + LOCOMOTION_TERMS["last_leg_actions"]]
+        start["leg_task.actions"][0] = log.column("locomotion_obs")[
+            row, _term_columns(LOCOMOTION_TERMS.items(), "last_leg_actions")]
     return start
 
 
-def safety_clamps(log: TickLog, contract: PolicyContract, leg_action_scale: float | None = None,
-                  leg_default: np.ndarray | None = None) -> dict[str, float]:
+def safety_clamps(log: TickLog, contract: PolicyContract, locomotion: LocomotionContract | None = None
+                  ) -> dict[str, float]:
     """Share of the PUSH ticks at which the runtime's safety layer sent other targets than the policies asked for
     (``CommandLimits.clamp``: base command, arm and leg joint ranges), per block. The simulation applies what the
     policies ask for; a clamped tick is one the robot (and sim-to-sim) sees differently."""
@@ -97,9 +105,9 @@ def safety_clamps(log: TickLog, contract: PolicyContract, leg_action_scale: floa
     mapping = contract.action_mapping()
     base, arm = mapping.commands(mapping.clipped(log.column("actions")[push]))
     shares = {"base_command": base, "arm_targets": arm}
-    if leg_action_scale is not None:
+    if locomotion is not None:  # leg targets as runtime/locomotion.py maps the network's outputs
         clipped = np.clip(log.column("locomotion_actions")[push], -contract.action_clip, contract.action_clip)
-        shares["leg_targets"] = leg_default + leg_action_scale * clipped
+        shares["leg_targets"] = np.asarray(locomotion.default_joint_positions) + locomotion.action_scale * clipped
     return {name: float((np.abs(wanted - log.column(name)[push]).max(axis=1) > 1e-6).mean()) if push.any() else 0.0
             for name, wanted in shares.items()}
 

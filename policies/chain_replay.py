@@ -20,27 +20,33 @@ import json
 import numpy as np
 import torch
 
+from dynpush.runtime.actions import ActionScaling
 from dynpush.runtime.contract import PolicyContract
 from dynpush.runtime.locomotion_contract import LocomotionContract
 from dynpush.runtime.locomotion_layout import LOCOMOTION_TERMS
 from dynpush.runtime.observation import POLICY_OBSERVATION_LAYOUT
 from dynpush.runtime.safety import State
-from dynpush.runtime.tick_log import TickLog
+from dynpush.runtime.tick_log import RecordLayout, TickLog
 from dynpush.sim.envs import make_push_env
 
 from .chain_record import ChainRecord
 from .env_probe import EnvProbe
+from .episodes import run_first_episodes
 from .onnx_policy import OnnxPolicy
 from .trained_env import env_config_for
 
 
-def _term_differences(logged: np.ndarray, simulated: np.ndarray, terms) -> dict[str, dict[str, float]]:
-    """Per term: the largest and the median absolute difference over the rows."""
-    out, k = {}, 0
-    for name, size in terms:
-        d = np.abs(logged[:, k:k + size] - simulated[:, k:k + size])
+PUSH_TERM_COLUMNS = RecordLayout(POLICY_OBSERVATION_LAYOUT).slices
+LOCOMOTION_TERM_COLUMNS = RecordLayout(tuple(LOCOMOTION_TERMS.items())).slices
+
+
+def _term_differences(logged: np.ndarray, simulated: np.ndarray, terms: dict[str, slice]
+                      ) -> dict[str, dict[str, float]]:
+    """Per term (name -> its columns): the largest and the median absolute difference over the rows."""
+    out = {}
+    for name, columns in terms.items():
+        d = np.abs(logged[:, columns] - simulated[:, columns])
         out[name] = {"max": float(d.max()), "median": float(np.median(d))} if len(d) else {"max": None, "median": None}
-        k += size
     return out
 
 
@@ -60,24 +66,15 @@ def compare_observations(record: ChainRecord, log: TickLog) -> dict:
     alignment = np.linalg.norm(log.column("base_position")[log_rows] - record.rows["base_pose"][rec_rows, :3], axis=1)
     obs = log.column("obs")[log_rows]
     keep = np.isfinite(obs).all(axis=1) & (record.rows["episode"][rec_rows] >= 0)
-    result = {"ticks_compared": int(keep.sum()), "alignment_error_m": float(alignment.max()) if len(alignment) else None,
+    result = {"ticks_compared": int(keep.sum()),
+              "alignment_error_m": float(alignment.max()) if len(alignment) else None,
               "push_observation": _term_differences(obs[keep], record.rows["policy_obs"][rec_rows][keep],
-                                                    POLICY_OBSERVATION_LAYOUT)}
+                                                    PUSH_TERM_COLUMNS)}
     if "locomotion_obs" in record.rows:
         result["locomotion_observation"] = _term_differences(
             log.column("locomotion_obs")[log_rows][keep], record.rows["locomotion_obs"][rec_rows][keep],
-            tuple(LOCOMOTION_TERMS.items()))
+            LOCOMOTION_TERM_COLUMNS)
     return result
-
-
-def _term_columns(terms, name: str) -> slice:
-    """The columns of term ``name`` in an observation laid out as ``terms`` ((name, size) pairs)."""
-    start = 0
-    for term, size in terms:
-        if term == name:
-            return slice(start, start + size)
-        start += size
-    raise KeyError(name)
 
 
 def _with_runtime_history(start: dict[str, np.ndarray], log: TickLog, tick: int) -> dict[str, np.ndarray]:
@@ -85,14 +82,13 @@ def _with_runtime_history(start: dict[str, np.ndarray], log: TickLog, tick: int)
     simulator's commands left the environment's own at rest: the same controller memory on both sides."""
     start = dict(start)
     row = int(np.flatnonzero(log.column("tick")[:, 0] == tick)[0])
-    columns = _term_columns(POLICY_OBSERVATION_LAYOUT, "last_actions")
+    columns = PUSH_TERM_COLUMNS["last_actions"]
     last_actions = log.column("obs")[row, columns]
     start["task.actions"], start["policy_obs"] = start["task.actions"].copy(), start["policy_obs"].copy()
     start["task.actions"][0] = start["policy_obs"][0, columns] = last_actions
     if "leg_task.actions" in start:
         start["leg_task.actions"] = start["leg_task.actions"].copy()
-        start["leg_task.actions"][0] = log.column("locomotion_obs")[
-            row, _term_columns(LOCOMOTION_TERMS.items(), "last_leg_actions")]
+        start["leg_task.actions"][0] = log.column("locomotion_obs")[row, LOCOMOTION_TERM_COLUMNS["last_leg_actions"]]
     return start
 
 
@@ -107,9 +103,22 @@ def safety_clamps(log: TickLog, contract: PolicyContract, locomotion: Locomotion
     shares = {"base_command": base, "arm_targets": arm}
     if locomotion is not None:  # leg targets as runtime/locomotion.py maps the network's outputs
         clipped = np.clip(log.column("locomotion_actions")[push], -contract.action_clip, contract.action_clip)
-        shares["leg_targets"] = np.asarray(locomotion.default_joint_positions) + locomotion.action_scale * clipped
+        legs = ActionScaling(locomotion.default_joint_positions, locomotion.action_scale)
+        shares["leg_targets"] = legs.targets(clipped)
     return {name: float((np.abs(wanted - log.column(name)[push]).max(axis=1) > 1e-6).mean()) if push.any() else 0.0
             for name, wanted in shares.items()}
+
+
+class _BasePath:
+    """World 0's base position [m] (world) before every step of its first episode."""
+
+    def __init__(self, probe: EnvProbe):
+        self.probe = probe
+        self.positions = [probe.base()[0, :3].copy()]
+
+    def observe(self, step: int, in_episode: torch.Tensor, continuing: torch.Tensor) -> None:
+        if bool(continuing[0]):
+            self.positions.append(self.probe.base()[0, :3].copy())
 
 
 def replay_in_simulation(record: ChainRecord, policy_path: str, locomotion_policy: str | None,
@@ -117,8 +126,8 @@ def replay_in_simulation(record: ChainRecord, policy_path: str, locomotion_polic
     """Every recorded episode from its start state, with the policies inside the environment (observation noise off,
     the record's seed and overrides, so that the base pushes fall at the same steps). With the runtime's tick ``log``
     each episode also starts with the runtime's action history (push and locomotion), else with the environment's
-    (none, as ``dynpush eval``'s episodes start). Per episode: the outcome as sim-to-sim reports it and the base
-    position [m] (world) before every step, ``(steps, 3)``."""
+    (none, as ``dynpush eval``'s episodes start). Each runs in ``dynpush eval``'s episode loop. Per episode: the
+    outcome as sim-to-sim reports it and the base position [m] (world) before every step, ``(steps, 3)``."""
     meta = json.loads(str(record.rows["meta"]))
     policy = OnnxPolicy(policy_path)
     overrides = list(meta["overrides"])
@@ -131,16 +140,12 @@ def replay_in_simulation(record: ChainRecord, policy_path: str, locomotion_polic
         if log is not None:
             start = _with_runtime_history(start, log, int(record.episode_rows("step", i)[0]))
         env.load_state_dict(start)
-        base, steps = [], 0
-        while True:
-            base.append(probe.base()[0, :3].copy())
-            env.step(torch.from_numpy(policy(env.policy_obs_t.numpy().copy())))
-            steps += 1
-            if int(env.reset_t[0]):
-                break
-        timed_out, toppled = bool(env.time_out_t[0]), bool(env.episode_toppled_t[0])
-        episodes.append({"success": int(env.episode_success_t[0]) == 1, "toppled": toppled, "steps": steps,
-                         "fallen": not (timed_out or toppled), "base_position": np.array(base)})
+        path = _BasePath(probe)
+        outcome = run_first_episodes(env, policy, [path], started=True)
+        steps, toppled = int(outcome.length[0]), bool(outcome.toppled[0])
+        episodes.append({"success": bool(outcome.success[0]), "toppled": toppled, "steps": steps,
+                         "fallen": steps < env.max_episode_length and not toppled,
+                         "base_position": np.array(path.positions)})
     return episodes
 
 

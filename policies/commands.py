@@ -58,24 +58,19 @@ def _train(args: argparse.Namespace) -> int:
     cfg = apply_recipe(task.config_class().preset_config(args.preset), Path(args.recipe) if args.recipe else None,
                        args.set or [])
     name = args.name or task.run_prefix + args.preset
-    extend_to = None
-    if args.resume and args.set:  # a resumed run keeps its config.json; only its length may change
-        fields = sorted({item.split("=", 1)[0] for item in args.set})
-        if fields != ["iterations"]:
-            raise ConfigError(f"--resume continues the run's own config; only iterations=N may be set, got {fields}")
-        extend_to = cfg.iterations
+    resume_overrides = list(args.set or []) if args.resume else []  # checked against the run's config.json
     if args.init_from and args.resume:
         raise ConfigError("--init-from starts a new run; --resume continues one: give one of them")
     if args.hours is not None and not args.hours > 0:
         raise ConfigError(f"--hours must be > 0, got {args.hours!r}")
     run_dir = Path(args.runs) / name
     if args.procs > 1:  # re-run this command under torchrun, one process per shard
-        run_config(cfg, run_dir, args.resume, extend_to)  # what every rank would refuse, refused here in one line
+        run_config(cfg, run_dir, args.resume, resume_overrides)  # what every rank would refuse, refused here in one line
         drop = [i for i, a in enumerate(argv) if a == "--procs" or a.startswith("--procs=")]
         for i in reversed(drop):
             del argv[i : i + (1 if "=" in argv[i] else 2)]
         return launch_processes(args.procs, [*argv, "--launched-as", command, "--launched-at", repr(started)])
-    train(cfg, run_dir, resume=args.resume, command=command, extend_to=extend_to,
+    train(cfg, run_dir, resume=args.resume, command=command, resume_overrides=resume_overrides,
           init_from=Path(args.init_from) if args.init_from else None, hours=args.hours, started=started)
     return 0
 

@@ -23,6 +23,7 @@ from dynpush.sim.config import ConfigError
 
 from .actor import build_actor, load_onnx_actor
 from .processes import ProcessGroup, sigterm_as_keyboard_interrupt
+from .overrides import apply_overrides
 from .run_folder import CONFIG, check_new_run, load_newest_readable, read_json, record_launch, write_config
 from .runner import CaTOnPolicyRunner, TimeBudget
 from .training_eval import PeriodicEvaluation
@@ -137,14 +138,15 @@ def rsl_rl_runner_cfg(num_steps_per_env: int, save_interval: int, ppo: PPOConfig
 
 
 def train(cfg: TaskTrainConfig, run_dir: Path, resume: bool = False, command: str | None = None,
-          extend_to: int | None = None, init_from: Path | None = None, hours: float | None = None,
+          resume_overrides: list[str] | tuple[str, ...] = (), init_from: Path | None = None, hours: float | None = None,
           started: float | None = None) -> CaTOnPolicyRunner:
     """Trains (or resumes) a push or locomotion policy (the task of ``cfg``'s type) into ``run_dir``; saves on
     Ctrl-C / SIGTERM.
 
     A new run needs a folder without a run in it; a resumed run uses its own ``config.json`` and its newest readable
-    checkpoint; ``extend_to`` changes its length to that many iterations in all (schedules that scale with the run
-    length follow the new length). A new run with ``init_from`` (a checkpoint of another run with the same networks,
+    checkpoint; ``resume_overrides`` may change its length (``iterations=N`` in all; schedules that scale with the run
+    length follow it) and the PPO update's settings (``ppo.FIELD=VALUE``, :func:`is_resumable`), written into
+    its ``config.json`` and recorded with the launch's command. A new run with ``init_from`` (a checkpoint of another run with the same networks,
     e.g. its ``imitation.pt``) starts from that run's actor and critic with their normalisers; its optimizer
     (learning rate of ``cfg``), action noise (``cfg.network.init_noise_std``), CaT state, iteration count and
     episodes are its own. ``init_from`` may also be an exported push ``policy.onnx`` (e.g. the shipped one): the
@@ -160,7 +162,7 @@ def train(cfg: TaskTrainConfig, run_dir: Path, resume: bool = False, command: st
     """
     time_budget = None if hours is None else TimeBudget.of_hours(hours, time.time() if started is None else started)
     group = ProcessGroup.from_environment()
-    cfg = run_config(cfg, run_dir, resume, extend_to)
+    cfg = run_config(cfg, run_dir, resume, resume_overrides)
     onnx_actor = read_onnx_actor(cfg, init_from)
     if cfg.network.hold_actor_normalizer is None:
         cfg.network.hold_actor_normalizer = init_from is not None
@@ -197,19 +199,28 @@ def train(cfg: TaskTrainConfig, run_dir: Path, resume: bool = False, command: st
     return runner
 
 
-def run_config(cfg: T, run_dir: Path, resume: bool, extend_to: int | None) -> T:
+def run_config(cfg: T, run_dir: Path, resume: bool, resume_overrides: list[str] | tuple[str, ...] = ()) -> T:
     """The config a launch trains with, checked: ``cfg`` for a new run (whose folder must not hold a run), the run's
-    own ``config.json`` for a resumed one (``extend_to``: its new length in iterations)."""
+    own ``config.json`` with ``resume_overrides`` (fields that :func:`is_resumable` allows) for a resumed one."""
     if not resume:
         check_new_run(run_dir)
         return cfg.validate()
     config_path = run_dir / CONFIG
     if not config_path.exists():
         raise MissingFileError(f"--resume: no {config_path}; start the run without --resume first")
-    cfg = type(cfg).from_dict(read_json(config_path))
-    if extend_to is not None:
-        cfg.iterations = extend_to
-    return cfg.validate()
+    fields = sorted({item.split("=", 1)[0].strip() for item in resume_overrides})
+    fixed = [field for field in fields if not is_resumable(field)]
+    if fixed:
+        raise ConfigError(f"--resume continues the run's own config; only iterations and ppo.* (not "
+                          f"ppo.returns_per_step) may be set, got {fixed}")
+    return apply_overrides(type(cfg).from_dict(read_json(config_path)), list(resume_overrides)).validate()
+
+
+def is_resumable(field: str) -> bool:
+    """Whether ``--resume --set`` may change ``field`` (a dotted config path): the run's length and the PPO update's
+    settings, the learning loop; the environment, the networks and the constraints stay as the run started.
+    ``ppo.returns_per_step`` stays too: it changes the units of the values the critic has learnt."""
+    return (field == "iterations" or field.startswith("ppo.")) and field != "ppo.returns_per_step"
 
 
 def read_onnx_actor(cfg: TaskTrainConfig, init_from: Path | None) -> torch.nn.Module | None:

@@ -79,7 +79,7 @@ def test_fine_tuning_fields_are_one_section_and_old_configs_read_into_it(tmp_pat
     (run / "config.json").write_text(json.dumps(old))
     from dynpush.policies.training import run_config
 
-    assert run_config(TrainConfig(), run, resume=True, extend_to=None) == cfg
+    assert run_config(TrainConfig(), run, resume=True) == cfg
     # The flat names are no override any more: one line naming the new field.
     with pytest.raises(ConfigError, match=r"^critic_warmup_iterations is now fine_tune.critic_warmup_iterations: set"
                                           r" fine_tune.critic_warmup_iterations=60$"):
@@ -126,21 +126,24 @@ def test_interrupted_then_resumed_run_equals_the_uninterrupted_run(tmp_path, mon
     assert torch.equal(straight.alg.c_max, resumed.alg.c_max)
 
 
-def test_a_finished_run_continues_to_more_iterations_in_a_later_sitting(tmp_path, capsys):
+def test_a_finished_run_continues_to_more_iterations_and_other_ppo_settings_in_a_later_sitting(tmp_path, capsys):
     from dynpush.cli import main
 
     tiny_set = ["env.num_envs=8", "num_steps_per_env=6", "network.actor_hidden=(32,)", "network.critic_hidden=(32,)"]
     assert main(["train", "--runs", str(tmp_path), "--name", "run", "--set", *tiny_set, "iterations=2"]) == 0
     assert main(["train", "--runs", str(tmp_path), "--name", "run", "--resume", "--set", "env.num_envs=16"]) == 2
-    assert "only iterations=N may be set, got ['env.num_envs']" in capsys.readouterr().err
-    assert main(["train", "--runs", str(tmp_path), "--name", "run", "--resume", "--set", "iterations=4"]) == 0
+    assert "only iterations and ppo.* (not ppo.returns_per_step) may be set, got ['env.num_envs']" in capsys.readouterr().err
+    assert main(["train", "--runs", str(tmp_path), "--name", "run", "--resume", "--set", "ppo.returns_per_step=False"]) == 2
+    assert "got ['ppo.returns_per_step']" in capsys.readouterr().err
+    assert len((tmp_path / "run" / "launches.jsonl").read_text().splitlines()) == 1  # refused launches wrote nothing
+    assert main(["train", "--runs", str(tmp_path), "--name", "run", "--resume", "--set", "iterations=4", "ppo.lam=1.0"]) == 0
     saved = torch.load(tmp_path / "run" / "model_3.pt", weights_only=False)
     assert saved["iter"] == 4
     config = json.loads((tmp_path / "run" / "config.json").read_text())
-    assert config["iterations"] == 4 and config["env"]["num_envs"] == 8
+    assert config["iterations"] == 4 and config["env"]["num_envs"] == 8 and config["ppo"]["lam"] == 1.0
     launches = [json.loads(line) for line in (tmp_path / "run" / "launches.jsonl").read_text().splitlines()]
     assert [launch["resume"] for launch in launches] == [False, True]
-    assert launches[1]["command"].endswith("--resume --set iterations=4")
+    assert launches[1]["command"].endswith("--resume --set iterations=4 ppo.lam=1.0")
 
 
 def test_goal_curriculum_steps_with_the_success_rate():
@@ -266,7 +269,7 @@ def test_behind_start_spread_follows_the_success_and_resumes_its_level(tmp_path)
     assert saved["infos"]["behind_difficulty"] == 0.5
     saved["infos"]["behind_difficulty"] = 0.75
     torch.save(saved, run / "model_1.pt")
-    resumed = train(apply_overrides(tiny(2), overrides), run, resume=True, extend_to=3)
+    resumed = train(apply_overrides(tiny(2), overrides), run, resume=True, resume_overrides=["iterations=3"])
     assert resumed.behind_difficulty == 0.75
     np.testing.assert_allclose(resumed.env.behind_start.numpy()[0], (1.0, BehindStartConfig(spread=0.3).spread_at(0.75)),
                                rtol=1e-6)
@@ -407,7 +410,7 @@ def test_distance_curriculum_moves_its_band_to_the_configured_goals_and_resumes_
     saved = torch.load(run / "model_1.pt", weights_only=False)
     saved["infos"]["distance_difficulty"] = 0.5  # a level reached later in a run
     torch.save(saved, run / "model_1.pt")
-    resumed = train(apply_overrides(tiny(2), overrides), run, resume=True, extend_to=3)
+    resumed = train(apply_overrides(tiny(2), overrides), run, resume=True, resume_overrides=["iterations=3"])
     assert resumed.distance_difficulty == 0.5 and resumed.env.goal_radius_range_value == pytest.approx((0.25, 1.35))
 
 
@@ -468,7 +471,7 @@ def test_mass_curriculum_run_starts_light_resumes_its_level_and_eval_envs_keep_t
     saved = torch.load(checkpoint, weights_only=False)
     saved["infos"]["mass_difficulty"] = 0.5  # a level reached later in a run
     torch.save(saved, checkpoint)
-    resumed = train(cfg, run, resume=True, extend_to=3)  # too short for an episode to end: the level holds
+    resumed = train(cfg, run, resume=True, resume_overrides=["iterations=3"])  # too short for an episode to end: the level holds
     assert resumed.mass_difficulty == 0.5 and resumed.env.object_mass_range_value == (1.0, 6.5)
 
 
@@ -483,8 +486,9 @@ def test_resume_with_another_env_layout_starts_fresh_episodes(tmp_path, capsys):
     saved = torch.load(checkpoint, weights_only=False)
     saved["infos"]["env_state"]["goal_difficulty"][:] = 0.35  # a curriculum run's difficulty survives
     torch.save(saved, checkpoint)
-    resumed = train(tiny(2), run, resume=True, extend_to=3)
+    resumed = train(tiny(2), run, resume=True, resume_overrides=["iterations=3", "ppo.lam=1.0"])
     assert resumed.current_learning_iteration == 2 and resumed.env.num_envs == 4
+    assert resumed.alg.lam == 1.0  # the PPO update trains with the resumed launch's setting
     assert resumed.env.goal_difficulty_value == pytest.approx(0.35)
     assert "fresh episodes, the saved environment state does not fit" in capsys.readouterr().out
     # Fresh episodes start together and end together: the curricula judge from one episode length on.

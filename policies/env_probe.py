@@ -75,9 +75,9 @@ class EnvProbe:
         return pose[:, :3] + quat_to_matrix(pose[:, 3:]) @ self.ee_offset
 
     def base_command(self) -> np.ndarray:
-        """(n, 6) the push policy's absolute base command of the last step (vx, vy [m/s] heading frame, yaw rate
-        [rad/s], roll, pitch [rad], height [m])."""
-        return self.env.task.base_command.numpy().astype(np.float64)
+        """(n, 6) the absolute base command of the last step as the base received it, clamped to the command limits
+        (vx, vy [m/s] heading frame, yaw rate [rad/s], roll, pitch [rad], height [m])."""
+        return self.env.base_target.numpy().astype(np.float64)
 
     def object_sliding_force(self) -> np.ndarray:
         """(n,) mu m g [N]: the horizontal force that slides the object over the floor (Coulomb; mu the combined

@@ -95,8 +95,9 @@ class LeggedPushEnv(PushEnv):
         n, scene = self.num_envs, self.scene
         self.leg_view = legged_view(self.state_0, scene.base_body, scene.robot_q_start, scene.robot_qd_start,
                                     scene.robot_qd_count, scene.leg_q, scene.leg_qd, scene.arm_q, scene.arm_qd, scene.shank_body)
-        # The push policy's absolute 6D command is the locomotion command.
-        self.leg_task = locomotion_task(n, command=self.task.base_command)
+        # The push policy's absolute 6D command, clamped to its limits (as the runtime sends it), is the locomotion
+        # command.
+        self.leg_task = locomotion_task(n, command=self.base_target)
         self.leg_actions = wp.zeros((n, loco_views.NUM_LEG_JOINTS), dtype=float)
         self.leg_obs = wp.zeros((n, loco_observations.NUM_POLICY_OBS), dtype=float)
         self.leg_critic_obs = wp.zeros((n, loco_observations.NUM_CRITIC_OBS), dtype=float)
@@ -118,7 +119,7 @@ class LeggedPushEnv(PushEnv):
             action_scale = contract.action_scale
         # Leg actions -> leg targets [rad]: the parameters of process_leg_actions.
         p = loco_views.LocomotionParams()
-        p.leg_default = f32(legs.leg_default)
+        p.leg_default, p.leg_lower, p.leg_upper = f32(legs.leg_default), f32(legs.leg_lower), f32(legs.leg_upper)
         p.arm_default = f32(self.scene.robot.arm_default)
         p.action_scale, p.clip = float(action_scale), self.cfg.actions.clip
         self.leg_params = p

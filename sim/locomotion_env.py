@@ -95,7 +95,7 @@ class LocomotionEnv(EnvBase, VecEnv):
         steps = lambda pair: wp.vec2(pair[0] / cfg.control_dt, pair[1] / cfg.control_dt)  # noqa: E731
         rnd = cfg.randomization
         p = views_k.LocomotionParams()
-        p.leg_default = f32(robot.leg_default)
+        p.leg_default, p.leg_lower, p.leg_upper = f32(robot.leg_default), f32(robot.leg_lower), f32(robot.leg_upper)
         p.arm_default, p.arm_lower, p.arm_upper = f32(robot.arm_default), f32(robot.arm_lower), f32(robot.arm_upper)
         p.action_scale, p.clip = cfg.action_scale, cfg.action_clip
         p.command_lower, p.command_upper = f32(cfg.commands.lower), f32(cfg.commands.upper)

@@ -133,6 +133,8 @@ class PushEnv(EnvBase, VecEnv):
         task.last_actions = zeros((n, NUM_ACTIONS))
         task.base_command = zeros((n, 6))
         task.base_command_filtered = zeros((n, 6))
+        # The base command the base receives: task.base_command clamped to the limits, written with it every step.
+        self.base_target = zeros((n, 6))
         task.base_wrench_b = zeros(n, wp.spatial_vector)
         task.arm_command = zeros((n, NUM_ARM_JOINTS))
         task.contacts = zeros((n, CONTACT_COLUMNS), int)
@@ -277,6 +279,12 @@ class PushEnv(EnvBase, VecEnv):
         cp.arm_scale = cfg.actions.arm_scale
         cp.control_dt = cfg.control_dt
         self.constraint_params = cp
+        # What the robot receives is clamped to the limits the exported contract carries (policies/export.py), as
+        # the runtime's safety layer clamps it; the constraints above judge the unclamped commands.
+        limits = actions_k.CommandLimits()
+        limits.base_lower, limits.base_upper = cp.base_lower, cp.base_upper
+        limits.arm_lower, limits.arm_upper = arm.lower, arm.upper
+        self.command_limits = limits
 
         t = cfg.terminations
         tp = terminations.TerminationParams()
@@ -335,8 +343,8 @@ class PushEnv(EnvBase, VecEnv):
         :meth:`step`.
 
         ``base_command`` (num_envs, 6) in ``BASE_COMMAND_NAMES`` order and units and ``arm_targets`` (num_envs, 5)
-        [rad] go where the action mapping writes its own (``task.base_command``, ``task.arm_command``, the arm's joint
-        position drives), unclipped and unscaled (kernel ``apply_commands``). The action terms (the policy observation's
+        [rad] go where the action mapping writes its own (``task.base_command``, ``task.arm_command``), unscaled, and
+        are sent to the robot as the mapped ones are, clamped to the command limits (kernel ``apply_commands``). The action terms (the policy observation's
         ``last_actions``, the action-rate reward and the arm-rate constraint) are about the policy's output, which
         commands do not carry: ``actions`` (num_envs, 11), the raw policy output behind the commands if the caller has
         it, are recorded as :meth:`step` records its own (so that ``step_commands(*action_mapping.commands(a), a)`` is
@@ -400,7 +408,8 @@ class PushEnv(EnvBase, VecEnv):
     def _drive_base(self, view: RobotView, state: newton.State) -> None:
         """The tracked base: the tracking wrench of the current command, on ``state`` (one substep)."""
         state.clear_forces()
-        self._launch(base_tracking.apply_base_wrench, [view, self.task, self.tracking_params, state.body_f])
+        self._launch(base_tracking.apply_base_wrench, [view, self.task, self.base_target, self.tracking_params,
+                                                       state.body_f])
 
     def _step_kernels(self) -> None:
         self._process_actions()
@@ -411,11 +420,13 @@ class PushEnv(EnvBase, VecEnv):
         with self._stage("kernels"):
             self._launch(actions_k.process_actions, [self.raw_actions, self.views[0], self.task, self.base_default,
                                                      self.base_scale, float(mapping.arm.scale), mapping.clip,
+                                                     self.command_limits, self.base_target,
                                                      self.control.joint_target_q])
 
     def _apply_commands(self) -> None:
         self._launch(actions_k.apply_commands, [self.raw_actions, self.command_base, self.command_arm, self.views[0],
-                                                self.task, self.action_mapping.clip, self.control.joint_target_q])
+                                                self.task, self.action_mapping.clip, self.command_limits,
+                                                self.base_target, self.control.joint_target_q])
 
     def _physics_and_task(self) -> None:
         """Physics substeps, then rewards, constraints, terminations, resets and observations."""
@@ -430,7 +441,7 @@ class PushEnv(EnvBase, VecEnv):
             self._launch(rewards_k.compute_rewards, [view, self.task, self.reward_params, self.success_angle,
                                                      self.base_scale, self.reward, self.reward_terms, self.success])
             self._launch(constraints_k.compute_constraints, [view, self.task, self.arm_limits, self.constraint_params,
-                                                             self.constraints])
+                                                             self.control.joint_target_q, self.constraints])
             self._robot_constraints()
             self._launch(terminations.compute_terminations, [view, self.task, self.termination_params, self.success,
                                                              self.reset_flags, self.time_out, self.episode_success,

@@ -126,20 +126,25 @@ def test_process_actions():
     base_default = rng.uniform(-0.5, 0.5, 6)
     base_scale = rng.uniform(0.1, 1.0, 6)
     target = rng.normal(size=n * Q).astype(np.float32)
+    limits, (base_lo, base_hi, arm_lo, arm_hi) = random_command_limits(rng)
     robot, task = structs(robot_np, task_np)
-    joint_target_q = arr(target)
-    launch(actions.process_actions, n, arr(raw), robot, task, arr(base_default), arr(base_scale), arm_scale, clip, joint_target_q)
+    joint_target_q, base_target = arr(target), arr(np.zeros((n, 6)))
+    launch(actions.process_actions, n, arr(raw), robot, task, arr(base_default), arr(base_scale), arm_scale, clip,
+           limits, base_target, joint_target_q)
 
     a = np.clip(np.where(np.isfinite(raw), raw, 0.0), -clip, clip)
     assert np.abs(raw[np.isfinite(raw)]).max() > clip and np.isfinite(task.actions.numpy()).all()
     close(task.last_actions.numpy(), task_np["actions"], atol=0)
     close(task.actions.numpy(), a, atol=0)
-    close(task.base_command.numpy(), base_default + base_scale * a[:, :6])
+    base = base_default + base_scale * a[:, :6]
+    close(task.base_command.numpy(), base, err_msg="the command as asked")
     arm = task_np["arm_default"] + arm_scale * a[:, 6:]
-    close(task.arm_command.numpy(), arm)
+    close(task.arm_command.numpy(), arm, err_msg="the command as asked")
+    assert ((base < base_lo) | (base > base_hi)).any() and ((arm < arm_lo) | (arm > arm_hi)).any()
+    close(base_target.numpy(), np.clip(base, base_lo, base_hi), err_msg="the base receives the clamped command")
     idx = robot_np["arm_q_start"][:, None] + np.arange(5)
-    target[idx] = arm
-    close(joint_target_q.numpy(), target, err_msg="arm targets at the arm's joint_q entries, the rest untouched")
+    target[idx] = np.clip(arm, arm_lo, arm_hi)
+    close(joint_target_q.numpy(), target, err_msg="clamped arm targets at the arm's joint_q entries, the rest untouched")
 
 
 def test_apply_commands():
@@ -152,16 +157,27 @@ def test_apply_commands():
     base_command = rng.normal(size=(n, 6)).astype(np.float32)
     arm_targets = rng.uniform(-2.0, 2.0, (n, 5)).astype(np.float32)
     target = rng.normal(size=n * Q).astype(np.float32)
+    limits, (base_lo, base_hi, arm_lo, arm_hi) = random_command_limits(rng)
     robot, task = structs(robot_np, task_np)
-    joint_target_q = arr(target)
-    launch(actions.apply_commands, n, arr(raw), arr(base_command), arr(arm_targets), robot, task, clip, joint_target_q)
+    joint_target_q, base_target = arr(target), arr(np.zeros((n, 6)))
+    launch(actions.apply_commands, n, arr(raw), arr(base_command), arr(arm_targets), robot, task, clip, limits,
+           base_target, joint_target_q)
 
     close(task.last_actions.numpy(), task_np["actions"], atol=0)
     close(task.actions.numpy(), np.clip(np.where(np.isfinite(raw), raw, 0.0), -clip, clip), atol=0)
     close(task.base_command.numpy(), base_command, atol=0)
     close(task.arm_command.numpy(), arm_targets, atol=0)
-    target[robot_np["arm_q_start"][:, None] + np.arange(5)] = arm_targets
+    close(base_target.numpy(), np.clip(base_command, base_lo, base_hi), atol=0)
+    target[robot_np["arm_q_start"][:, None] + np.arange(5)] = np.clip(arm_targets, arm_lo, arm_hi)
     close(joint_target_q.numpy(), target, atol=0, err_msg="arm targets at the arm's joint_q entries, the rest untouched")
+
+
+def random_command_limits(rng):
+    """A ``CommandLimits`` struct of random float32 bounds, and the bounds (base lower, upper, arm lower, upper)."""
+    bounds = [np.float32(b) for b in (rng.uniform(-1.0, -0.2, 6), rng.uniform(0.2, 1.0, 6),
+                                     rng.uniform(-1.5, -0.5, 5), rng.uniform(0.5, 1.5, 5))]
+    names = ("base_lower", "base_upper", "arm_lower", "arm_upper")
+    return make_struct(actions.CommandLimits, **dict(zip(names, bounds))), bounds
 
 
 # --------------------------------------------------------------------------- tracked base (DESIGN decision 2)
@@ -191,11 +207,12 @@ def test_apply_base_wrench():
     body_f0 = rng.normal(size=(n * STRIDE, 6)).astype(np.float32)
     robot, task = structs(robot_np, task_np)
     body_f = wp.array(body_f0, dtype=wp.spatial_vector, device=DEVICE)
-    launch(base_tracking.apply_base_wrench, n, robot, task, p, body_f)
+    base_target = task_np["base_command"] + 0.1 * rng.normal(size=(n, 6)).astype(np.float32)  # not the asked command
+    launch(base_tracking.apply_base_wrench, n, robot, task, arr(base_target), p, body_f)
 
-    # Reference. First-order lag of the command, then the PD wrench of the docstring.
+    # Reference. First-order lag of the command the base receives, then the PD wrench of the docstring.
     alpha = p.dt / (p.time_constant + p.dt)
-    u = task_np["base_command_filtered"] + alpha * (task_np["base_command"] - task_np["base_command_filtered"])
+    u = task_np["base_command_filtered"] + alpha * (base_target - task_np["base_command_filtered"])
     x_b, qd_b = robot_np["body_q"][base], robot_np["body_qd"][base]
     v, omega = qd_b[:, :3], qd_b[:, 3:]
     bodies = robot_np["robot_body_start"][:, None] + np.arange(ROBOT_BODIES)
@@ -355,7 +372,11 @@ def test_compute_constraints():
     params.object_tilt_limit, params.base_moving_speed, params.arm_scale, params.control_dt = tilt_limit, moving, arm_scale, dt
     robot, task = structs(robot_np, task_np)
     out = wp.zeros((n, constraints.NUM_CONSTRAINTS), dtype=float, device=DEVICE)
-    launch(constraints.compute_constraints, n, robot, task, limits, params, out)
+    # The arm drives' targets: the asked command clamped to the joint range (actions.py), away from it in some worlds.
+    arm_q_index = robot_np["arm_q_start"][:, None] + np.arange(5)
+    joint_target_q = np.zeros(robot_np["joint_q"].size, dtype=np.float32)
+    joint_target_q[arm_q_index] = np.clip(task_np["arm_command"], lower, upper)
+    launch(constraints.compute_constraints, n, robot, task, limits, params, arr(joint_target_q), out)
 
     f32 = lambda x: np.asarray(x, dtype=np.float32).astype(np.float64)  # noqa: E731
     lower, upper, vel, kp, kd, peak, nominal = map(f32, (lower, upper, vel, kp, kd, peak, nominal))
@@ -363,7 +384,9 @@ def test_compute_constraints():
     q = robot_np["joint_q"][robot_np["arm_q_start"][:, None] + np.arange(5)]
     qd = robot_np["joint_qd"][robot_np["arm_qd_start"][:, None] + np.arange(5)]
     da = task_np["actions"][:, 6:] - task_np["last_actions"][:, 6:]
-    tau = np.clip(kp * (q_cmd - q) - kd * qd, -peak, peak)  # PD drive, saturated at the peak torque
+    q_target = joint_target_q[arm_q_index].astype(np.float64)
+    assert (q_target != q_cmd).any()
+    tau = np.clip(kp * (q_target - q) - kd * qd, -peak, peak)  # PD drive of the received target, saturated at the peak
     tau_leg = task_np["base_wrench_b"] @ f32(leg_map).T
     speed = np.linalg.norm(robot_np["body_qd"][robot_np["base_body"], :3], axis=1)
     theta = tilt(robot_np["body_q"][robot_np["object_body"], 3:])
@@ -379,7 +402,7 @@ def test_compute_constraints():
         "object_balance": np.where(speed > moving, np.abs(theta) - tilt_limit, 0.0)[:, None],
     }
     assert [(name, ref.shape[1]) for name, ref in groups.items()] == list(constraints.CONSTRAINT_GROUPS)
-    assert (np.abs(kp * (q_cmd - q) - kd * qd) > peak).any() and (speed > moving).any() and (speed < moving).any()
+    assert (np.abs(kp * (q_target - q) - kd * qd) > peak).any() and (speed > moving).any() and (speed < moving).any()
     actual, start = out.numpy(), 0
     for name, ref in groups.items():
         assert (ref > 0).any() and (ref <= 0).any(), f"random states should both violate and satisfy {name}"

@@ -100,7 +100,8 @@ def read(cls, s):
 def loco_params(rng, **overrides):
     """A ``LocomotionParams`` and its numpy values."""
     values = dict(  # arm joints 1-4 are clipped by one of their limits at +- arm_amplitude
-        leg_default=rng.uniform(-1, 1, 12), arm_default=[0.1, -0.2, 0.3, 0.0, 0.2, 0.1],
+        leg_default=rng.uniform(-1, 1, 12), leg_lower=rng.uniform(-2.5, -1.5, 12), leg_upper=rng.uniform(1.5, 2.5, 12),
+        arm_default=[0.1, -0.2, 0.3, 0.0, 0.2, 0.1],
         arm_lower=[-2.0, -0.6, -1.5, -0.7, -2.0, -0.3], arm_upper=[2.0, 1.5, 0.6, 2.0, 0.7, 0.3],
         action_scale=0.4, clip=2.5, command_lower=[-1.0, -0.5, -0.8, -0.3, -0.2, 0.3],
         command_upper=[1.5, 0.5, 0.8, 0.3, 0.25, 0.6], standing_probability=0.25, command_interval=(100.0, 200.0),
@@ -135,7 +136,9 @@ def test_process_leg_actions_and_arm_targets():
     joint_target_q = arr(target0)
     launch(actions_k.process_leg_actions, n, arr(raw), params, view, task, joint_target_q)
     legs_only = target0.astype(np.float64)
-    legs_only[view_np["leg_q"]] = p["leg_default"] + f32(0.4) * np.clip(np.where(np.isfinite(raw), raw, 0.0), -2.5, 2.5)
+    asked = p["leg_default"] + f32(0.4) * np.clip(np.where(np.isfinite(raw), raw, 0.0), -2.5, 2.5)
+    assert ((asked < p["leg_lower"]) | (asked > p["leg_upper"])).any()
+    legs_only[view_np["leg_q"]] = np.clip(asked, p["leg_lower"], p["leg_upper"])
     close(joint_target_q.numpy(), legs_only, rtol=1e-6, atol=1e-6, err_msg="process_leg_actions writes leg targets only")
     launch(actions_k.write_arm_targets, n, view, task, joint_target_q)
 
@@ -143,7 +146,7 @@ def test_process_leg_actions_and_arm_targets():
     assert (np.abs(raw[np.isfinite(raw)]) > 2.5).any() and (np.abs(raw) < 2.5).any()
     close(task.last_actions.numpy(), task_np["actions"], atol=0, err_msg="history shifted")
     close(task.actions.numpy(), a, atol=0, err_msg="clipped, non-finite -> 0")
-    leg = p["leg_default"] + f32(0.4) * a
+    leg = np.clip(p["leg_default"] + f32(0.4) * a, p["leg_lower"], p["leg_upper"])  # clamped to the joint ranges
     close(task.leg_target.numpy(), leg, rtol=1e-6, atol=1e-6)
     expected = target0.astype(np.float64)
     expected[view_np["leg_q"]] = leg

@@ -196,6 +196,41 @@ def test_step_commands_is_step_on_the_mapped_actions(small_env):
         env.step_commands(np.full((4, 6), np.nan), arm_targets)
 
 
+def test_the_robot_receives_what_the_runtime_sends(small_env):
+    """Commands beyond their limits move the robot as the runtime's clamped commands do: ``step`` on actions and
+    ``step_commands`` on the commands the runtime's safety layer sends for them (clamped to the exported contract's
+    limits) give the same observations and rewards; the constraints still judge the commands as asked."""
+    from dynpush.policies.export import build_contract
+    from dynpush.policies.train import TrainConfig
+    from dynpush.runtime.safety import CommandLimits
+
+    env = small_env
+    contract = build_contract(TrainConfig(env=env.cfg))
+    limits = CommandLimits(np.array(contract.base_command_lower), np.array(contract.base_command_upper),
+                           np.array(contract.arm_joint_lower), np.array(contract.arm_joint_upper), np.zeros(0), np.zeros(0))
+    env.reset()
+    start = env.state_dict()
+    generator = torch.Generator().manual_seed(8)
+    actions = [2.0 * torch.randn(4, 11, generator=generator) for _ in range(6)]
+    stepped = []
+    for a in actions:
+        obs, reward, _, extras = env.step(a)
+        stepped.append((obs["critic"], reward, extras["constraints"][:, :11].clone()))
+    env.load_state_dict(start)
+    clamped = 0
+    for a, (critic, reward, asked_violations) in zip(actions, stepped):
+        base_command, arm_targets = env.action_mapping.commands(a.numpy())
+        sent_base, sent_arm = base_command.copy(), arm_targets.copy()
+        for row in range(4):
+            assert limits.clamp(sent_base[row], sent_arm[row], np.zeros(0)) is None
+        clamped += int((sent_base != base_command).any(axis=1).sum() + (sent_arm != arm_targets).any(axis=1).sum())
+        obs, got_reward, _, extras = env.step_commands(sent_base, sent_arm, a)
+        torch.testing.assert_close(obs["critic"], critic, rtol=1e-4, atol=1e-4)
+        torch.testing.assert_close(got_reward, reward, rtol=1e-4, atol=1e-4)
+        assert (asked_violations > 0).any() and not (extras["constraints"][:, :11] > 0).any()
+    assert clamped > 0
+
+
 def test_a_diverged_world_ends_its_episode_and_starts_afresh():
     """A non-finite velocity in one world's object (a diverged solver) ends that world's episode as diverged, a
     failure that is not a time-out, and its next episode starts from finite state: the observations stay finite

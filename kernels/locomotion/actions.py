@@ -1,6 +1,7 @@
 """Action processing of the locomotion task, and what else goes into the simulator before the physics.
 
-The policy outputs 12 leg joint position offsets: ``q_leg^target = q_leg^default + action_scale * a``; the joints'
+The policy outputs 12 leg joint position offsets: ``q_leg^target = q_leg^default + action_scale * a``, clamped to the
+joints' ranges as the runtime's safety layer clamps the leg targets it sends (``dynpush.runtime.safety``); the joints'
 PD drives (stiffness ``k_p``, damping ``k_d``, effort limit from ``robot_legged.usda``) produce
 ``tau = clip(k_p (q^target - q) - k_d qd, -effort, effort)``. The random arm motion's targets go to the arm's
 drives, and the end-effector force (``sampling.sample_ee_force``, heading frame) to its link as a world-frame
@@ -25,12 +26,13 @@ def process_leg_actions(
     joint_target_q: wp.array(dtype=float),
 ):
     """Shifts the action history, clips the actions (non-finite counts as zero) and writes the leg joint
-    targets."""
+    targets, clamped to the joints' ranges."""
     w = wp.tid()
     for j in range(NUM_LEG_JOINTS):
         task.last_actions[w, j] = task.actions[w, j]
         task.actions[w, j] = clipped_action(raw_actions[w, j], params.clip)
-        target = params.leg_default[j] + params.action_scale * task.actions[w, j]
+        target = wp.clamp(params.leg_default[j] + params.action_scale * task.actions[w, j], params.leg_lower[j],
+                          params.leg_upper[j])
         task.leg_target[w, j] = target
         joint_target_q[view.leg_q[w, j]] = target
 

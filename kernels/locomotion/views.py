@@ -66,6 +66,8 @@ class LocomotionParams:
     """Actions, command sampling and randomization (``LocomotionEnvConfig``)."""
 
     leg_default: wp.array(dtype=float)  # (12,) [rad]
+    leg_lower: wp.array(dtype=float)  # (12,) [rad] joint range (the targets are clamped to it, as the runtime's)
+    leg_upper: wp.array(dtype=float)  # (12,) [rad]
     arm_default: wp.array(dtype=float)  # (6,) [rad]
     arm_lower: wp.array(dtype=float)  # (6,) [rad]
     arm_upper: wp.array(dtype=float)  # (6,) [rad]

@@ -1,7 +1,8 @@
 """Tracked-base locomotion model (docs/task.md, "Deviations from the paper").
 
 The base is a free rigid body. Once per substep a wrench drives it toward the commanded 6D base
-state ``(vx, vy, yaw rate, roll, pitch, height)`` after a first-order lag that stands for the
+state ``(vx, vy, yaw rate, roll, pitch, height)`` (the command the robot receives, clamped to its limits:
+``base_target`` of ``actions.py``) after a first-order lag that stands for the
 locomotion controller's bandwidth. Horizontal velocities are tracked in the heading (yaw) frame.
 The wrench supports the whole robot's weight at its centre of mass and saturates at force and
 torque limits, so an object that is too heavy slows the robot down as it would on hardware.
@@ -31,14 +32,16 @@ class BaseTrackingParams:
 
 
 @wp.kernel
-def apply_base_wrench(robot: RobotView, task: PushTask, params: BaseTrackingParams, body_f: wp.array(dtype=wp.spatial_vector)):
-    """Adds the tracking wrench to ``body_f`` of each base (world frame, at the base CoM)."""
+def apply_base_wrench(robot: RobotView, task: PushTask, base_target: wp.array2d(dtype=float), params: BaseTrackingParams,
+                      body_f: wp.array(dtype=wp.spatial_vector)):
+    """Adds the tracking wrench of ``base_target`` (num_worlds, 6) to ``body_f`` of each base (world frame, at the base
+    CoM)."""
     w = wp.tid()
     b = robot.base_body[w]
     alpha = params.dt / (params.time_constant + params.dt)
     for i in range(6):
         f = task.base_command_filtered[w, i]
-        task.base_command_filtered[w, i] = f + alpha * (task.base_command[w, i] - f)
+        task.base_command_filtered[w, i] = f + alpha * (base_target[w, i] - f)
     vx_cmd = task.base_command_filtered[w, 0]
     vy_cmd = task.base_command_filtered[w, 1]
     yaw_rate_cmd = task.base_command_filtered[w, 2]

@@ -70,8 +70,12 @@ def compute_constraints(
     task: PushTask,
     limits: ArmLimits,
     params: ConstraintParams,
+    joint_target_q: wp.array(dtype=float),
     constraints: wp.array2d(dtype=float),
 ):
+    """Every world's constraint row. The command limits judge the commands as the policy asked for them
+    (``task.base_command``, ``task.arm_command``); the arm's drive torque is that of the target its drive received
+    (``joint_target_q``: the command clamped to the joint range, ``actions.py``)."""
     w = wp.tid()
     k = int(0)
     for i in range(NUM_BASE_COMMANDS):
@@ -97,7 +101,7 @@ def compute_constraints(
         constraints[w, k + j] = wp.abs(robot.joint_qd[qd0 + j]) - limits.velocity[j]
     k += NUM_ARM_JOINTS
     for j in range(NUM_ARM_JOINTS):
-        tau = arm_drive_torque(limits, j, task.arm_command[w, j], robot.joint_q[q0 + j], robot.joint_qd[qd0 + j])
+        tau = arm_drive_torque(limits, j, joint_target_q[q0 + j], robot.joint_q[q0 + j], robot.joint_qd[qd0 + j])
         constraints[w, k + j] = wp.abs(tau) - limits.nominal_torque[j]
     k += NUM_ARM_JOINTS
     wrench = task.base_wrench_b[w]

@@ -179,12 +179,15 @@ class Controller:
             clipped = self._mapping.clipped(actions)
             base_command, arm_targets = self._mapping.commands(clipped)
         leg_targets = self._leg_hold.copy()
-        if self.locomotion is not None and state in ACTIVE_STATES:
-            leg_targets = self.locomotion.step(robot.state, base_command)
-            self.layout.view(self.record, "locomotion_obs")[:] = self.locomotion.model.input[0]
-            # the raw network output, as the push policy's actions column (replay re-runs the network on the inputs)
-            self.layout.view(self.record, "locomotion_actions")[:] = self.locomotion.model.output[0]
-        fault = self.limits.clamp(base_command, arm_targets, leg_targets)
+        # The locomotion network reads the base command the robot receives, clamped to its limits (as in training).
+        fault = self.limits.clamp(base_command, arm_targets, np.zeros(0))
+        if fault is None:
+            if self.locomotion is not None and state in ACTIVE_STATES:
+                leg_targets = self.locomotion.step(robot.state, base_command)
+                self.layout.view(self.record, "locomotion_obs")[:] = self.locomotion.model.input[0]
+                # the raw network output, as the push policy's actions column (replay re-runs the network on the inputs)
+                self.layout.view(self.record, "locomotion_actions")[:] = self.locomotion.model.output[0]
+            fault = self.limits.clamp(base_command, arm_targets, leg_targets)
         if fault is not None:
             state = self.safety.trip(fault)
             base_command, arm_targets, leg_targets = self._stop_targets()

@@ -226,6 +226,22 @@ def test_locomotion_onnx_sends_12_leg_and_5_arm_targets(tmp_path):
     np.testing.assert_allclose(obs[9:21], -0.1, rtol=1e-6, err_msg="leg positions relative to the default")
 
 
+def test_the_locomotion_network_reads_the_clamped_base_command(tmp_path):
+    """A push policy that asks for more than the base command's limits: the locomotion network's command term is the
+    command the robot receives, clamped, as the legged simulator gives it in training."""
+    ctrl = controller(tmp_path, bias=np.full(11, 3.0), locomotion=True, safety={"arm_ramp_s": 0.02})
+    ticks = Ticks(ctrl, legs=12)
+    command = [ticks() for _ in range(3)][-1]
+    assert command.state == State.PUSH
+    mapping = ctrl.contract.action_mapping()
+    asked, _ = mapping.commands(mapping.clipped(np.full(11, 3.0)))
+    upper = np.array(ctrl.contract.base_command_upper)
+    assert (asked > upper).any()
+    np.testing.assert_allclose(command.base_command, np.minimum(asked, upper))
+    obs = ctrl.record[ctrl.layout.slices["locomotion_obs"]]
+    np.testing.assert_allclose(obs[3:9], 2.0 * command.base_command, rtol=1e-6, err_msg="the clamped command, scaled")
+
+
 @pytest.mark.parametrize("leg_output", [25.0, -1e6])
 def test_locomotion_outputs_are_clipped_at_the_push_policy_action_clip(tmp_path, leg_output):
     """As the legged simulator clips them (``env.actions.clip``, which the push policy's contract carries as

@@ -107,8 +107,12 @@ class Controller:
         return self.push.input[0]
 
     def _at_goal(self, obj: TrackedPose, goal: Goal) -> bool:
+        """Training's success test (``kernels/push/rewards.py``): the object's centroid within the success distance of
+        the goal point (at the goal's height, as the observation places it) and its rotation within the success angle
+        of the goal's."""
         p = obj.pose.position
-        return (math.hypot(p[0] - goal.x, p[1] - goal.y) <= self.contract.success_distance_m
+        goal_height = p[2] if self._goal_height is None else self._goal_height
+        return (math.dist(p, (goal.x, goal.y, goal_height)) <= self.contract.success_distance_m
                 and rotation_angle(obj.pose.quat_xyzw, yaw_quat(goal.yaw)) <= self.contract.success_angle_rad)
 
     # ------------------------------------------------------------------ the tick

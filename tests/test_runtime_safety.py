@@ -214,6 +214,18 @@ def test_overruns_beyond_the_limit_stop_the_robot(tmp_path, caplog):
     assert ticks.ctrl.safety.reason == reason and [r.getMessage() for r in caplog.records] == [f"{reason}; stopping"]
 
 
+def test_the_goal_is_reached_as_training_counts_it(tmp_path):
+    """Within the success distance of the goal point in 3D, at the goal's height (the object's when the goal came): an
+    object at the goal's x, y but 15 cm lower (tilted, say) has not arrived; 5 cm lower it has."""
+    ticks = Ticks(controller(tmp_path, safety={"arm_ramp_s": 0.02}))
+    ticks.object, ticks.goal = np.array([0.5, 0.0, 0.35]), Goal(0.0, 0.0, 0.0)
+    assert [ticks() for _ in range(4)][-1].state == State.PUSH
+    ticks.object = np.array([0.0, 0.0, 0.20])
+    assert ticks().state == State.PUSH
+    ticks.object = np.array([0.0, 0.0, 0.30])
+    assert ticks().state == State.HOLD
+
+
 def test_locomotion_onnx_sends_12_leg_and_5_arm_targets(tmp_path):
     ticks = Ticks(controller(tmp_path, locomotion=True, safety={"arm_ramp_s": 0.02}), legs=12)
     command = [ticks() for _ in range(3)][-1]

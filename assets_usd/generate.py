@@ -221,8 +221,6 @@ LEG_NOMINAL_FOOT_POSITIONS = tuple(
 )
 
 # --- articulated legs (robot_legged.usda only; ANYmal-like stand-ins, see the module docstring) ---
-LEG_BODY_NAMES = tuple(f"{leg}_{part}" for leg in LEG_NAMES for part in ("HIP", "THIGH", "SHANK"))
-LEG_FOOT_NAMES = tuple(f"{leg}_foot" for leg in LEG_NAMES)
 LEG_LINK_MASSES = (1.4, 1.6, 0.5)  # hip, thigh, shank [kg]; 3.5 kg per leg
 LEG_LIMITS = ((-0.72, 0.72), (-1.6, 1.6), (-2.6, 2.6))  # HAA, HFE, KFE [rad]
 LEG_EFFORT_LIMIT = 80.0  # N m, peak (ANYmal C/D drives)
@@ -275,11 +273,6 @@ def arm_ee_position_base(q: Sequence[float]) -> tuple[float, float, float]:
 
 
 DEFAULT_EE_POSITION_BASE = arm_ee_position_base(DEFAULT_ARM_JOINT_POSITIONS)
-DEFAULT_EE_POSITION_WORLD = (
-    DEFAULT_EE_POSITION_BASE[0],
-    DEFAULT_EE_POSITION_BASE[1],
-    _r(DEFAULT_EE_POSITION_BASE[2] + NOMINAL_BASE_HEIGHT),
-)
 
 # --- objects / ground ---
 CUBOID_SIZE = (0.5, 0.5, 0.7)

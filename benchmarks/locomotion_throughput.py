@@ -1,4 +1,4 @@
-"""Legged simulation throughput on the CPU (issue 8): world-steps per second of captured control steps.
+"""Legged simulation throughput on the CPU: world-steps per second of captured control steps.
 
 Prints one JSON object with, in one run (compare the ratios, not the absolute figures, across machines):
 - ``locomotion``: ``LocomotionEnv`` (MuJoCo-Warp, MuJoCo's contacts) at --num-envs worlds with random leg

@@ -95,8 +95,9 @@ def _with_runtime_history(start: dict[str, np.ndarray], log: TickLog, tick: int)
 def safety_clamps(log: TickLog, contract: PolicyContract, locomotion: LocomotionContract | None = None
                   ) -> dict[str, float]:
     """Share of the PUSH ticks at which the runtime's safety layer sent other targets than the policies asked for
-    (``CommandLimits.clamp``: base command, arm and leg joint ranges), per block. The simulation applies what the
-    policies ask for; a clamped tick is one the robot (and sim-to-sim) sees differently."""
+    (``CommandLimits.clamp``: base command, arm and leg joint ranges), per block: how often the policies ask for more
+    than the limits. The environments clamp what they send to the same limits (``kernels/push/actions.py``,
+    ``kernels/locomotion/actions.py``), so a replay in simulation receives the same clamped targets."""
     push = log.column("state")[:, 0] == State.PUSH
     mapping = contract.action_mapping()
     base, arm = mapping.commands(mapping.clipped(log.column("actions")[push]))

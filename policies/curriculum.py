@@ -27,7 +27,7 @@ use them: an environment starts with the paper's goals, starts and success angle
 
 Near-goal starts (a start-state or "reverse" curriculum, Florensa et al. 2017): a share of the training resets
 draws the goal next to the object's start with the yaw off by a drawn angle (``PushEnv.set_near_goal_starts``),
-where the shipped policy fails most (it ends 39 % of its episodes at the goal with the rotation off). Everything
+where the shipped policy fails most (many of its episodes end at the goal with the rotation off). Everything
 else is drawn as in the paper. An environment starts with share 0, so evaluation and export never use it.
 
 Starts behind the object: a share of the training resets puts the robot behind the object as seen from the goal,
@@ -149,7 +149,7 @@ class NearGoalStartConfig:
 
     share: float = 0.0  # fraction of resets drawn near the goal; 0: off, the paper's resets exactly
     goal_radius: float = 0.1  # [m] max distance of the goal from the object's start (the success radius)
-    max_yaw: float = 0.6  # [rad] max |goal yaw - object yaw|: the "near goal" set the shipped policy solves in 63 %
+    max_yaw: float = 0.6  # [rad] max |goal yaw - object yaw|: the "near goal" set of docs/ppo_fine_tuning.md
 
     def validate(self, prefix: str = "near_goal_starts") -> None:
         for name, high in (("share", 1.0), ("goal_radius", 2.0), ("max_yaw", math.pi)):

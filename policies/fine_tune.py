@@ -43,9 +43,9 @@ class FineTuneConfig:
 
     critic_warmup_learning_rate: float | None = None
     """[Adam step size] of the warm-up iterations, in (0, 0.01]; None: ``ppo.learning_rate``. The run's own takes
-    over with the first actor update. Fine-tuning a ``dynpush imitate`` actor, the critic explained 7-14 % of the
-    variance of the returns after 30 iterations at 1e-4, 52-64 % after 40-74 at 1e-3
-    (docs/experiments/expert_guided_initialisation.md, "Where the fine-tunings lose it")."""
+    over with the first actor update. A critic that starts fresh learns the returns' scale far faster at 1e-3 than
+    at the small learning rates of a fine-tune (docs/experiments/expert_guided_initialisation.md, "Where the
+    fine-tunings lose it")."""
 
     imitation_weight: tuple[float, float] = (0.0, 0.0)
     """(first, last iteration) weight, both >= 0, of the scripted pusher's imitation term in PPO's loss (per unit of

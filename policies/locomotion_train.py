@@ -1,4 +1,4 @@
-"""Training configuration of the locomotion task (``dynpush train --task locomotion``, issue 8).
+"""Training configuration of the locomotion task (``dynpush train --task locomotion``; docs/legged.md).
 
 Same learner as the push task (rsl_rl PPO + our CaT subclass, ``policies/runner.py``); only the environment,
 the network sizes and the ``p_max`` curricula differ.
@@ -7,8 +7,8 @@ The defaults are the recipe that walks on this robot (docs/legged.md; the runs i
 docs/experiments/legged_fidelity.md, "A walking gait under the disturbances"): the gait forms without disturbances
 and without constraint terminations, then the random arm motions and base pushes grow in (``disturbance_ramp``).
 The constraints are computed and logged, but their ``p_max`` is 0: every run with CaT's (Chane-Sane et al.,
-IROS 2024: collisions hard with p_max 1, the others soft with p_max 0.05 -> 0.25) learned to stand, three from
-scratch and two from a walking policy.
+IROS 2024: collisions hard with p_max 1, the others soft with p_max 0.05 -> 0.25), from scratch or from a walking
+policy, learned to stand (docs/experiments/legged_fidelity.md).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ class LocomotionTrainConfig:
     task: str = "locomotion"  # tells a run's config.json from a push run's (policies/tasks.py: task_of_config)
     preset: str = "cpu"
     env: LocomotionEnvConfig = field(default_factory=LocomotionEnvConfig)
-    iterations: int = 1500  # ~37 M world-steps at 1024 worlds x 24 steps (flat-ground tracking converges in ~30 M)
+    iterations: int = 1500  # ~37 M world-steps at 1024 worlds x 24 steps
     num_steps_per_env: int = 24  # legged_gym
     save_interval: int = 50
     ppo: PPOConfig = field(default_factory=lambda: PPOConfig(entropy_coef=0.01))  # legged_gym: entropy 0.01
@@ -45,8 +45,7 @@ class LocomotionTrainConfig:
     p_max: dict[str, tuple[float, float]] = field(default_factory=_no_terminations)  # see the module docstring
     p_max_ramp_fraction: float = 0.5  # of the run over which p_max goes from initial to final
     # Iterations (start, end) over which the random arm motions and base pushes grow from none to their full
-    # size (ours, schedules.DisturbanceRampConfig): a run walked at ~200 iterations without them, and kept walking
-    # while they grew over 150 iterations.
+    # size (ours, schedules.DisturbanceRampConfig): the gait forms first, then keeps walking while they grow.
     disturbance_ramp: tuple[int, int] = (250, 400)
 
     @staticmethod

@@ -69,8 +69,7 @@ class ReachWeightConfig:
 class DisturbanceRampConfig:
     """Linear ramp of the locomotion task's random arm motions and base pushes (ours): none before
     ``start_iteration``, their full size from ``end_iteration`` on. With them from the start, PPO learned to
-    stand instead of walking (four runs); without them it walked within 230 iterations
-    (docs/experiments/legged_fidelity.md)."""
+    stand instead of walking; without them it walked (docs/experiments/legged_fidelity.md)."""
 
     start_iteration: int = 0
     end_iteration: int = 0

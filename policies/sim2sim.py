@@ -5,8 +5,8 @@
 with the runtime's own datagrams (``dynpush.runtime.packets``):
 
 - **commands in** (``DPC1``): the onboard locomotion is the tracked base, so the 6D base command and
-  the 5 arm targets go to the PushEnv as they are (``PushEnv.step_commands``: the runtime applied the action
-  mapping, the environment does not apply it again; the policy's contract must still hold the environment's
+  the 5 arm targets go to the PushEnv as its own commands (``PushEnv.step_commands``: the runtime applied the action
+  mapping, the environment does not apply it again, and clamps them to its command limits as it clamps its own; the policy's contract must still hold the environment's
   parameters). The packets carry no policy actions, so the environment's action terms (its ``last_actions``
   observation, action-rate reward and arm-rate constraint) see a policy at rest; nothing here reads them. Mode
   stop (or no command yet): the default base command (zero velocities), arm targets at the measured joint
@@ -71,7 +71,7 @@ from dynpush.runtime.udp import UdpEndpoint
 from dynpush.sim.envs import make_push_env
 
 from .chain_record import StepRecorder
-from .env_probe import EnvProbe
+from .env_probe import EnvProbe, yaw_of
 from .onnx_policy import OnnxPolicy
 from .play import TrajectoryObserver, concatenate_episodes, episode_row, episode_setup, plot_play
 from .trained_env import env_config_for
@@ -246,8 +246,7 @@ class SimRobot:
 
     def send_goal(self) -> None:
         x, y = (float(v) for v in self.env.task.goal_pos.numpy()[0][:2])
-        qx, qy, qz, qw = self.env.task.goal_quat.numpy()[0].astype(np.float64)
-        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        yaw = float(yaw_of(self.env.task.goal_quat.numpy()[0].astype(np.float64)))
         self.endpoint.send(encode_goal(GoalCommand(seq=self._seq, kind=GOAL_SET, x=x, y=y, yaw=yaw)),
                            self._runtime(self.cfg.goal_port))
 

@@ -13,6 +13,7 @@ targets and the 6D base command out, every tick logged. Modules, one job each:
 - ``safety``: the state machine and limits; ``controller``: one tick; ``timing``: clocks and the
   ticker; ``tick_log``: the crash-safe log; ``app``: the loop
 - ``replay``, ``sim2sim``, ``commands``: ``dynpush replay``, ``dynpush sim2sim``, ``dynpush run``
+- ``locomotion_layout``: the locomotion observation's terms and the leg joints; ``errors``: the runtime's errors
 
 Importing or running it never imports torch, warp or newton (``tests/test_runtime_loop.py``).
 """

@@ -161,7 +161,7 @@ class BaseTrackingConfig:
     damping_ratio: float = 1.0
     max_horizontal_force: float = 300.0  # N: about 0.5 x robot weight, a quadruped's traction
     max_vertical_force: float = 1500.0  # N
-    max_torque: tuple[float, float, float] = (150.0, 250.0, 80.0)  # N m about base x, y, z
+    max_torque: tuple[float, float, float] = (150.0, 250.0, 80.0)  # N m about heading x, y (roll, pitch) and world z
     # Effective inertia [kg m^2] scaling the attitude/yaw gains: a standing quadruped resists tilting
     # far more stiffly than its base's own inertia would suggest.
     attitude_inertia: tuple[float, float, float] = (10.0, 10.0, 5.0)
@@ -273,9 +273,9 @@ class SimConfig:
 
 @dataclass
 class MuJoCoConfig:
-    """MuJoCo-Warp solver settings of the legged robot, chosen by measurement (``benchmarks/locomotion_throughput.py``):
-    CG with 5 iterations ran 1.42x MuJoCo's defaults (Newton solver, default buffers) at 256 worlds on one core;
-    a robot uses at most 32 constraint rows and ~17 contact candidates."""
+    """MuJoCo-Warp solver settings of the legged robot, chosen by measurement (``benchmarks/locomotion_throughput.py``,
+    docs/simulator.md): CG with 5 iterations runs faster than MuJoCo's defaults (Newton solver, default buffers); a
+    robot uses at most 32 constraint rows and ~17 contact candidates."""
 
     solver: str = "cg"
     iterations: int = 5
@@ -293,7 +293,7 @@ class MuJoCoConfig:
 
 @dataclass
 class LeggedModeConfig:
-    """Legged mode of the push task (issue 8): ``robot_legged.usda`` on MuJoCo-Warp, its 12 leg joints driven by a
+    """Legged mode of the push task (docs/legged.md): ``robot_legged.usda`` on MuJoCo-Warp, its 12 leg joints driven by a
     frozen locomotion policy that turns the push policy's 6D base command into leg joint targets at the control
     rate, instead of the tracked base. The leg-torque constraint then uses the simulated PD torques."""
 
@@ -302,13 +302,11 @@ class LeggedModeConfig:
     # (``PushEnv.set_leg_targets``: sim-to-sim, where the runtime runs the locomotion policy).
     locomotion_policy: str = ""
     # Newton's collision pipeline generates the contacts here (robot and object), up to sim.contacts_per_world per
-    # world, and MuJoCo drops without an error what exceeds its buffers. With the locomotion task's 24 / 64 the
-    # object lost its ground contacts whenever the legs moved: 29.7 % of 64 episodes "toppled" with no robot near,
-    # 0.0 % with 64 / 256. Each contact takes 4 constraint rows (pyramidal friction cone).
-    # The locomotion task's 5 CG (and line-search) iterations do not converge the object's contacts beside a walking
-    # robot: objects no robot part touched rose and tipped over (15 of 35 toppled objects in 128 episodes of a push
-    # policy on the legs; tests/test_locomotion.py). Same 256 episodes with 5 / 15 (line search 5) / 30 iterations:
-    # 27.3 / 16.0 / 12.1 % toppled, 0.79 / 0.97 / 1.26 s per 1000 world-steps.
+    # world, and MuJoCo drops without an error what exceeds its buffers: with the locomotion task's 24 / 64 the
+    # object lost its ground contacts whenever the legs moved. Each contact takes 4 constraint rows (pyramidal
+    # friction cone). The locomotion task's 5 CG (and line-search) iterations do not converge the object's contacts
+    # beside a walking robot: objects no robot part touched rose and tipped over (tests/test_locomotion.py); 30 topple
+    # fewer at a third more time per step (docs/simulator.md).
     mujoco: MuJoCoConfig = field(default_factory=lambda: MuJoCoConfig(iterations=30, ls_iterations=30, nconmax=64,
                                                                       njmax=256))
 

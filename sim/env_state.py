@@ -124,7 +124,7 @@ class EnvBase:
     # ------------------------------------------------------------------ the step
     def _capture(self) -> None:
         """Captures the control step into ``_graph``."""
-        with wp.ScopedCapture() as capture:  # works on the CPU device too: 6.4k -> ~8k world-steps/s at 256 worlds, same states
+        with wp.ScopedCapture() as capture:  # on the CPU device too: faster, same states (docs/simulator.md)
             self._step_kernels()
         self._graph = capture.graph
 

@@ -1,4 +1,4 @@
-"""LeggedPushEnv: the push task with articulated legs and a frozen locomotion policy in the loop (issue 8).
+"""LeggedPushEnv: the push task with articulated legs and a frozen locomotion policy in the loop (docs/legged.md).
 
 Everything of :class:`~dynpush.sim.push_env.PushEnv` is kept (sampling, object, rewards, constraints,
 terminations, observations of the push policy) except the base: ``robot_legged.usda`` stands on its feet on

@@ -1,4 +1,4 @@
-"""Typed configuration of the locomotion environment (issue 8).
+"""Typed configuration of the locomotion environment (docs/legged.md).
 
 The paper freezes a learned 6D-command locomotion policy under the push policy (III) but gives none of
 its training numbers; defaults follow the CaT paper (Chane-Sane et al., IROS 2024) and legged_gym's
@@ -87,8 +87,8 @@ class LocomotionRandomizationConfig:
 @dataclass
 class LocomotionRewardConfig:
     """Tracking rewards ``w exp(-e^2 / sigma)`` (CaT: rewards track the command, constraints do the rest) and
-    legged_gym's stepping reward: without it training settled in standing still (1.6 % fell, no velocity
-    tracked after 450 iterations), which also avoids every foot-air-time violation."""
+    legged_gym's stepping reward: without it training settled in standing still, which also avoids every
+    foot-air-time violation (docs/experiments/legged_fidelity.md)."""
 
     linear_velocity_weight: float = 1.0  # legged_gym: 1.0, sigma 0.25
     yaw_rate_weight: float = 0.5  # legged_gym: 0.5, sigma 0.25
@@ -101,8 +101,8 @@ class LocomotionRewardConfig:
     feet_air_time_weight: float = 1.0  # legged_gym: 1.0
     air_time_target: float = 0.3  # [s] ours (legged_gym: 0.5): every run that walked (docs/experiments/legged_fidelity.md)
     moving_command: float = 0.1  # legged_gym: |(vx, vy)| > 0.1; ours adds |yaw rate|
-    # -sum_j (a_t - a_t-1)^2 over the leg actions; legged_gym: 0.01; ours 0.03 (measured: the leg action
-    # rate exceeds CaT's 40 1/s in 16 % of the steps instead of 91 %, with the same velocity tracking)
+    # -sum_j (a_t - a_t-1)^2 over the leg actions; legged_gym: 0.01; ours 0.03: far fewer steps beyond CaT's leg
+    # action-rate limit with the same velocity tracking (docs/experiments/legged_fidelity.md)
     action_rate_weight: float = 0.03
     base_vertical_velocity_weight: float = 0.0  # -w v_z^2; legged_gym lin_vel_z: 2.0; ours off
     base_roll_pitch_rate_weight: float = 0.0  # -w (omega_x^2 + omega_y^2); legged_gym ang_vel_xy: 0.05; ours off

@@ -196,8 +196,8 @@ class LocomotionEnv(EnvBase, VecEnv):
         newton.eval_fk(model, self.state_0.joint_q, self.state_0.joint_qd, self.state_0, mask=self.articulation_mask)
 
     def _randomize_base_masses(self) -> None:
-        """Draws every world's base mass offset once (as legged_gym): updating MuJoCo's model costs as much as
-        the physics of a step (72 ms at 512 worlds), too much for every reset."""
+        """Draws every world's base mass offset once (as legged_gym): updating MuJoCo's model costs about as much as
+        the physics of a step, too much for every reset."""
         low, high = self.cfg.randomization.base_mass_offset
         offsets = np.random.default_rng(self.cfg.seed).uniform(low, high, self.num_envs)
         model, bodies = self.scene.model, self.scene.base_body

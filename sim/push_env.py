@@ -32,6 +32,7 @@ from dynpush.kernels.push import (
 )
 from dynpush.kernels.push.views import CONTACT_COLUMNS, NUM_ACTIONS, NUM_ARM_JOINTS, NUM_CRITIC_OBS, NUM_POLICY_OBS, PushTask, RobotView
 from dynpush.runtime.actions import ActionMapping, ActionScaling
+from dynpush.runtime.frames import yaw_quat
 
 from .config import ConfigError, PushEnvConfig
 from .env_state import EnvBase, articulation_reset_mask
@@ -106,8 +107,8 @@ class PushEnv(EnvBase, VecEnv):
         self.state_0 = model.state()
         self.state_1 = model.state()
         self.control = model.control()
-        # Contact buffers sized per world: XPBD's contact kernels run over the whole buffer, so
-        # Newton's default (hundreds per world for this scene) cost 5x in solver time.
+        # Contact buffers sized per world: XPBD's contact kernels run over the whole buffer, and Newton's default
+        # (hundreds per world for this scene) multiplied the solver's time (docs/simulator.md).
         self.collision = newton.CollisionPipeline(
             model, rigid_contact_max=self.cfg.sim.contacts_per_world * self.num_envs
         )
@@ -523,7 +524,7 @@ class PushEnv(EnvBase, VecEnv):
             steps, height = self.task.episode_step.numpy(), self.task.object_dims.numpy()[:, 2]
             for w, (x, y, yaw) in goals.items():
                 position[w] = (x, y, 0.5 * height[w])
-                quat[w] = (0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw))
+                quat[w] = yaw_quat(yaw)
                 steps[w] = 0
             self.task.goal_pos.assign(position)
             self.task.goal_quat.assign(quat)

@@ -1,4 +1,4 @@
-"""Locomotion task (issue 8) end to end: a tiny CaT-PPO run -> locomotion.onnx (parity, contract) -> the runtime's
+"""Locomotion task end to end: a tiny CaT-PPO run -> locomotion.onnx (parity, contract) -> the runtime's
 locomotion (its numpy observation equals the Warp kernel's) -> the legged push environment (the network in the
 loop, simulated leg torques as constraints) -> sim2sim with the runtime running the locomotion ONNX."""
 

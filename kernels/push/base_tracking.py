@@ -10,7 +10,7 @@ torque limits, so an object that is too heavy slows the robot down as it would o
 
 import warp as wp
 
-from ..frames import heading_roll_pitch, heading_yaw
+from ..frames import heading_roll_pitch, heading_yaw, yaw_quat
 from .views import PushTask, RobotView
 
 wp.set_module_options({"enable_backward": False})
@@ -26,8 +26,8 @@ class BaseTrackingParams:
     attitude_damping: float  # 2 zeta omega_n [1/s]
     max_horizontal_force: float  # [N]
     max_vertical_force: float  # [N]
-    max_torque: wp.vec3  # [N m] about base x, y, z
-    attitude_inertia: wp.vec3  # effective stance inertia about base x, y [kg m^2]
+    max_torque: wp.vec3  # [N m] about the heading frame's x, y (roll, pitch) and world z (yaw)
+    attitude_inertia: wp.vec3  # [kg m^2] effective stance inertia about the same axes (z scales the yaw-rate torque)
     gravity: float  # [m/s^2], positive
 
 
@@ -67,7 +67,7 @@ def apply_base_wrench(robot: RobotView, task: PushTask, base_target: wp.array2d(
 
     # Horizontal velocity in the heading frame.
     yaw = heading_yaw(q_b)
-    q_yaw = wp.quat_from_axis_angle(wp.vec3(0.0, 0.0, 1.0), yaw)
+    q_yaw = yaw_quat(yaw)
     v_target = wp.quat_rotate(q_yaw, wp.vec3(vx_cmd, vy_cmd, 0.0))
     f_xy = mass * params.velocity_gain * (wp.vec3(v_target[0], v_target[1], 0.0) - wp.vec3(v_w[0], v_w[1], 0.0))
     f_xy_norm = wp.length(f_xy)

@@ -1,5 +1,5 @@
 """Helpers shared by the kernels of both tasks (``wp.func`` only, no launches): a raw policy output clipped
-for the action buffers, and the writes into the observation buffers (a 3-vector, the actor's noisy copy of the
+for the action buffers, the torque of a joint's PD position drive, and the writes into the observation buffers (a 3-vector, the actor's noisy copy of the
 critic's entries). Frames and units are the caller's.
 """
 
@@ -12,6 +12,13 @@ def clipped_action(a: float, clip: float):
     if not wp.isfinite(a):
         return 0.0
     return wp.clamp(a, -clip, clip)
+
+
+@wp.func
+def pd_drive_torque(stiffness: float, damping: float, target: float, q: float, qd: float, limit: float):
+    """Torque [N m] of a joint's PD position drive towards ``target`` [rad] at position ``q`` [rad] and velocity
+    ``qd`` [rad/s], saturated at ``+-limit`` [N m] (the actuator's peak)."""
+    return wp.clamp(stiffness * (target - q) - damping * qd, -limit, limit)
 
 
 @wp.func

@@ -10,6 +10,7 @@ sphere and shank, at the control step's last substep, measured by the solver; ``
 
 import warp as wp
 
+from ..common import pd_drive_torque
 from .views import NUM_FEET, NUM_LEG_JOINTS, LeggedLimits, LeggedView, LocomotionTask
 
 wp.set_module_options({"enable_backward": False})
@@ -29,10 +30,8 @@ NUM_CONSTRAINTS = sum(size for _, size in CONSTRAINT_GROUPS)
 @wp.func
 def leg_torque(view: LeggedView, task: LocomotionTask, limits: LeggedLimits, w: int, j: int):
     """Torque [N m] of leg joint ``j`` under its PD drive towards ``task.leg_target``."""
-    q = view.joint_q[view.leg_q[w, j]]
-    qd = view.joint_qd[view.leg_qd[w, j]]
-    tau = limits.stiffness[j] * (task.leg_target[w, j] - q) - limits.damping[j] * qd
-    return wp.clamp(tau, -limits.effort_limit[j], limits.effort_limit[j])
+    return pd_drive_torque(limits.stiffness[j], limits.damping[j], task.leg_target[w, j],
+                           view.joint_q[view.leg_q[w, j]], view.joint_qd[view.leg_qd[w, j]], limits.effort_limit[j])
 
 
 @wp.func

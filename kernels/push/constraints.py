@@ -13,6 +13,7 @@ import warp as wp
 
 from dynpush.runtime.locomotion_layout import NUM_LEG_JOINTS
 
+from ..common import pd_drive_torque
 from ..frames import tilt_angle
 from .views import NUM_ARM_JOINTS, NUM_BASE_COMMANDS, NUM_COLLISIONS, PushTask, RobotView
 
@@ -57,13 +58,6 @@ class ConstraintParams:
     control_dt: float  # [s]
 
 
-@wp.func
-def arm_drive_torque(limits: ArmLimits, j: int, q_cmd: float, q: float, qd: float):
-    """Torque [N m] of the arm's PD position drive, saturated at the actuator's peak torque."""
-    tau = limits.stiffness[j] * (q_cmd - q) - limits.damping[j] * qd
-    return wp.clamp(tau, -limits.peak_torque[j], limits.peak_torque[j])
-
-
 @wp.kernel
 def compute_constraints(
     robot: RobotView,
@@ -101,7 +95,8 @@ def compute_constraints(
         constraints[w, k + j] = wp.abs(robot.joint_qd[qd0 + j]) - limits.velocity[j]
     k += NUM_ARM_JOINTS
     for j in range(NUM_ARM_JOINTS):
-        tau = arm_drive_torque(limits, j, joint_target_q[q0 + j], robot.joint_q[q0 + j], robot.joint_qd[qd0 + j])
+        tau = pd_drive_torque(limits.stiffness[j], limits.damping[j], joint_target_q[q0 + j], robot.joint_q[q0 + j],
+                              robot.joint_qd[qd0 + j], limits.peak_torque[j])
         constraints[w, k + j] = wp.abs(tau) - limits.nominal_torque[j]
     k += NUM_ARM_JOINTS
     wrench = task.base_wrench_b[w]

@@ -22,6 +22,7 @@ import torch
 
 from dynpush.runtime.actions import ActionScaling
 from dynpush.runtime.contract import PolicyContract
+from dynpush.runtime.locomotion import clipped_outputs
 from dynpush.runtime.locomotion_contract import LocomotionContract
 from dynpush.runtime.locomotion_layout import LOCOMOTION_TERMS
 from dynpush.runtime.observation import POLICY_OBSERVATION_LAYOUT
@@ -103,9 +104,8 @@ def safety_clamps(log: TickLog, contract: PolicyContract, locomotion: Locomotion
     base, arm = mapping.commands(mapping.clipped(log.column("actions")[push]))
     shares = {"base_command": base, "arm_targets": arm}
     if locomotion is not None:  # leg targets as runtime/locomotion.py maps the network's outputs
-        clipped = np.clip(log.column("locomotion_actions")[push], -contract.action_clip, contract.action_clip)
         legs = ActionScaling(locomotion.default_joint_positions, locomotion.action_scale)
-        shares["leg_targets"] = legs.targets(clipped)
+        shares["leg_targets"] = legs.targets(clipped_outputs(log.column("locomotion_actions")[push], contract.action_clip))
     return {name: float((np.abs(wanted - log.column(name)[push]).max(axis=1) > 1e-6).mean()) if push.any() else 0.0
             for name, wanted in shares.items()}
 

@@ -77,5 +77,11 @@ class OnnxLocomotion:
         for name, scale, columns in self._terms:
             observation[columns] = scale * self._term(name, state, base_command)
         actions = self.model.run().astype(np.float64)
-        self.last_actions = np.where(np.isfinite(actions), np.clip(actions, -self.clip, self.clip), actions)
+        self.last_actions = clipped_outputs(actions, self.clip)
         return self.legs.targets(self.last_actions)
+
+
+def clipped_outputs(outputs: np.ndarray, clip: float) -> np.ndarray:
+    """A locomotion network's raw outputs (..., 12) clipped to ``+-clip``, as the legged simulator clips them; a
+    non-finite output stays as it is, for the safety layer's check of the targets."""
+    return np.where(np.isfinite(outputs), np.clip(outputs, -clip, clip), outputs)

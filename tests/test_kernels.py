@@ -258,6 +258,18 @@ def test_apply_base_wrench():
 
 # --------------------------------------------------------------------------- keypoints (III-D)
 @wp.kernel
+def _keypoints(robot: RobotView, task: PushTask, object_keypoints_w: wp.array2d(dtype=wp.vec3),
+               goal_keypoints_w: wp.array2d(dtype=wp.vec3)):
+    """``K_o`` and ``K_g`` [m], world frame, (num_worlds, 8): the vertices the reward's keypoint distance sums over."""
+    w = wp.tid()
+    x_o = robot.body_q[robot.object_body[w]]
+    for k in range(8):
+        object_keypoints_w[w, k] = keypoints.obb_vertex(wp.transform_get_translation(x_o), wp.transform_get_rotation(x_o),
+                                                        task.object_dims[w], k)
+        goal_keypoints_w[w, k] = keypoints.obb_vertex(task.goal_pos[w], task.goal_quat[w], task.object_dims[w], k)
+
+
+@wp.kernel
 def _keypoint_distance(robot: RobotView, task: PushTask, out: wp.array(dtype=float)):
     w = wp.tid()
     x_o = robot.body_q[robot.object_body[w]]
@@ -278,7 +290,7 @@ def test_keypoints_and_distance():
     robot, task = structs(robot_np, task_np)
     k_o, k_g = (wp.zeros((n, 8), dtype=wp.vec3, device=DEVICE) for _ in range(2))
     dist = wp.zeros(n, dtype=float, device=DEVICE)
-    launch(keypoints.compute_keypoints, n, robot, task, k_o, k_g)
+    launch(_keypoints, n, robot, task, k_o, k_g)
     launch(_keypoint_distance, n, robot, task, dist)
 
     dims = task_np["object_dims"]

@@ -6,9 +6,8 @@ the world frame; both boxes share the object's dimensions.
 
 import warp as wp
 
-from .views import PushTask, RobotView
-
 wp.set_module_options({"enable_backward": False})
+
 
 @wp.func
 def obb_vertex(p: wp.vec3, q: wp.quat, dims: wp.vec3, k: int):
@@ -33,19 +32,3 @@ def keypoint_distance(p_o: wp.vec3, q_o: wp.quat, p_g: wp.vec3, q_g: wp.quat, di
         total += wp.dot(d, d)
     return wp.sqrt(total)
 
-
-@wp.kernel
-def compute_keypoints(
-    robot: RobotView,
-    task: PushTask,
-    object_keypoints_w: wp.array2d(dtype=wp.vec3),
-    goal_keypoints_w: wp.array2d(dtype=wp.vec3),
-):
-    """Writes ``K_o`` and ``K_g`` [m], world frame, shape (num_worlds, 8)."""
-    w = wp.tid()
-    x_o = robot.body_q[robot.object_body[w]]
-    for k in range(8):
-        object_keypoints_w[w, k] = obb_vertex(
-            wp.transform_get_translation(x_o), wp.transform_get_rotation(x_o), task.object_dims[w], k
-        )
-        goal_keypoints_w[w, k] = obb_vertex(task.goal_pos[w], task.goal_quat[w], task.object_dims[w], k)

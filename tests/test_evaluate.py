@@ -217,6 +217,7 @@ def test_object_sliding_force_is_mu_m_g_with_the_randomised_combined_friction(sm
     """The probe inverts the sampler's object coefficient (2 mu - floor): mu = F / (m g) lies in the task's range."""
     from dynpush.policies.env_probe import EnvProbe
 
+    small_env.reset()  # sampled episodes: a test before may have started user-chosen ones of one friction
     force = EnvProbe(small_env).object_sliding_force()
     mu = force / (small_env.task.object_mass.numpy() * 9.81)
     low, high = small_env.cfg.randomization.friction

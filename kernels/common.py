@@ -1,6 +1,6 @@
 """Helpers shared by the kernels of both tasks (``wp.func`` only, no launches): a raw policy output clipped
-for the action buffers, the torque of a joint's PD position drive, and the writes into the observation buffers (a 3-vector, the actor's noisy copy of the
-critic's entries). Frames and units are the caller's.
+for the action buffers, the torque of a joint's PD position drive, and the writes into the observation buffers
+(a 3-vector, the actor's noisy copy of the critic's entries). Frames and units are the caller's.
 """
 
 import warp as wp

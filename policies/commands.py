@@ -259,7 +259,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--task", choices=tuple(TASKS), default="push",
                    help="push: the goal-pushing policy (tracked base); locomotion: the legged 6D-command policy (MuJoCo-Warp)")
     p.add_argument("--preset", default="cpu", help="cpu (2-core machine) or paper (4096 envs, 20000 iterations, GPU)")
-    p.add_argument("--name", default=None, help="run name (default: the preset, e.g. cpu; locomotion_cpu for --task locomotion)")
+    p.add_argument("--name", default=None,
+                   help="run name (default: the preset, e.g. cpu; locomotion_cpu for --task locomotion)")
     p.add_argument("--runs", default="runs", help="folder of the runs")
     p.add_argument("--resume", action="store_true", help="continue the run from its latest checkpoint")
     p.add_argument("--init-from", default=None, metavar="CHECKPOINT",

@@ -56,7 +56,8 @@ class PushTask:
     arm_default: wp.array(dtype=float)  # (5,) default arm configuration [rad]
     actions: wp.array2d(dtype=float)  # a_t, clipped raw actions
     last_actions: wp.array2d(dtype=float)  # a_{t-1}
-    base_command: wp.array2d(dtype=float)  # absolute u_base^cmd = default + scale * a_base, as asked (the base gets it clamped)
+    # absolute u_base^cmd = default + scale * a_base, as the policy asks for it (the base receives it clamped)
+    base_command: wp.array2d(dtype=float)
     base_command_filtered: wp.array2d(dtype=float)  # the clamped command after the locomotion bandwidth lag
     base_wrench_b: wp.array(dtype=wp.spatial_vector)  # applied tracking wrench (force, torque), base frame
     arm_command: wp.array2d(dtype=float)  # absolute q_j^cmd, as asked (the drives get it clamped)

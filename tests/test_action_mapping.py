@@ -17,6 +17,7 @@ from dynpush.kernels.push.views import PushTask, RobotView
 from dynpush.runtime.actions import NUM_BASE_COMMANDS, ActionMapping, ActionScaling
 from dynpush.runtime.observation import NUM_ACTIONS, NUM_ARM_JOINTS
 from dynpush.runtime.safety import CommandLimits
+from test_kernels import random_command_limits
 from test_locomotion_kernels import loco_params, random_scene, structs
 from warp_numpy_helpers import arr, close, launch, make_struct
 
@@ -44,10 +45,7 @@ def test_process_actions_equals_the_runtime_mapping():
         task = make_struct(PushTask, arm_default=mapping.arm.default, actions=np.zeros((n, NUM_ACTIONS)),
                            last_actions=np.zeros((n, NUM_ACTIONS)), base_command=np.zeros((n, NUM_BASE_COMMANDS)),
                            arm_command=np.zeros((n, NUM_ARM_JOINTS)))
-        bounds = [np.float32(rng.uniform(*r, size)).astype(np.float64) for r, size in
-                  (((-1.0, -0.2), 6), ((0.2, 1.0), 6), ((-1.5, -0.5), 5), ((0.5, 1.5), 5))]
-        limits = make_struct(actions_k.CommandLimits, **dict(zip(("base_lower", "base_upper", "arm_lower", "arm_upper"),
-                                                                   bounds)))
+        limits, bounds = random_command_limits(rng)
         joint_target_q, base_target = arr(np.zeros(n * Q)), arr(np.zeros((n, NUM_BASE_COMMANDS)))
         launch(actions_k.process_actions, n, arr(raw), robot, task, arr(mapping.base.default), arr(mapping.base.scale),
                float(mapping.arm.scale), mapping.clip, limits, base_target, joint_target_q)

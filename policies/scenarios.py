@@ -31,7 +31,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from dynpush.sim.config import ConfigError
+from dynpush.sim.config import check_object_friction
 from dynpush.sim.episode import EpisodeSpec
 from dynpush.sim.envs import make_push_env
 
@@ -65,11 +65,8 @@ def run_scenario(policy_path: Path, scenario: Scenario, out_dir: Path, noise: bo
     env_overrides = (*overrides, f"env.episode_length_s={scenario.goal_timeout_s + 1.0}")
     env_cfg = env_config_for(policy, len(worlds), noise, device, seed, env_overrides)
     env = make_push_env(env_cfg)
-    min_friction = 0.5 * env.scene.ground_friction
     for i, obj in enumerate(scenario.objects):
-        if obj.friction < min_friction:
-            raise ConfigError(f"{scenario.name}.objects[{i}].friction must be >= {min_friction} (half the floor's"
-                              f" own coefficient in ground.usda), got {obj.friction}")
+        check_object_friction(f"{scenario.name}.objects[{i}].friction", obj.friction, env.scene.ground_friction)
     probe = EnvProbe(env)
     dt = env_cfg.control_dt
     budget = int(round(scenario.goal_timeout_s / dt))

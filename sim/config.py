@@ -30,6 +30,14 @@ def check_range(name: str, pair: tuple[float, float], lo: float = -math.inf, hi:
         raise ConfigError(f"{name} must lie within [{lo}, {hi}], got {pair!r}")
 
 
+def check_object_friction(name: str, friction: float, ground_friction: float) -> None:
+    """Raise :class:`ConfigError` unless the object-floor coefficient ``friction`` is one Newton can make: it averages
+    the two coefficients of a contact, so the object's own, ``2 * friction - ground_friction``, must stay >= 0."""
+    if not (math.isfinite(friction) and 2.0 * friction >= ground_friction):
+        raise ConfigError(f"{name} must be >= {0.5 * ground_friction:g} (half the floor's coefficient in ground.usda),"
+                          f" got {friction!r}")
+
+
 def check_positive(name: str, value: float, allow_zero: bool = False) -> None:
     """Raise :class:`ConfigError` unless ``value`` is finite and > 0 (>= 0 with ``allow_zero``)."""
     ok = value >= 0.0 if allow_zero else value > 0.0

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import ConfigError
+from .config import ConfigError, check_object_friction
 
 SHAPES = ("cuboid", "cylinder")
 
@@ -45,10 +45,7 @@ class EpisodeSpec:
             raise ConfigError(f"episode.dims must be 3 lengths in [0.05, 2.0] m, got {self.dims!r}")
         if not (math.isfinite(self.mass) and self.mass > 0.0):
             raise ConfigError(f"episode.mass must be > 0 kg, got {self.mass!r}")
-        # Newton averages coefficients: the object's own, 2 * friction - floor, must stay >= 0.
-        if not (math.isfinite(self.friction) and self.friction >= 0.5 * ground_friction):
-            raise ConfigError(f"episode.friction must be >= {0.5 * ground_friction} (half the floor's coefficient),"
-                              f" got {self.friction!r}")
+        check_object_friction("episode.friction", self.friction, ground_friction)
         for name in ("com_offset", "goal", "base"):
             value = getattr(self, name)
             if len(value) != 3 or not all(math.isfinite(v) for v in value):

@@ -34,7 +34,7 @@ from dynpush.kernels.push.views import CONTACT_COLUMNS, NUM_ACTIONS, NUM_ARM_JOI
 from dynpush.runtime.actions import ActionMapping, ActionScaling
 from dynpush.runtime.frames import yaw_quat
 
-from .config import ConfigError, PushEnvConfig
+from .config import ConfigError, PushEnvConfig, check_object_friction
 from .env_state import EnvBase, articulation_reset_mask
 from .episode import EpisodeSpec
 from .scene import build_scene
@@ -83,10 +83,7 @@ class PushEnv(EnvBase, VecEnv):
         a, arm_default = cfg.actions, self.scene.robot.arm_default[:NUM_ARM_JOINTS]
         self.action_mapping = ActionMapping(ActionScaling(a.base_default, a.base_scale),
                                             ActionScaling(arm_default, a.arm_scale), a.clip)
-        # Newton averages the two coefficients of a contact: the object's own is 2 * combined - floor.
-        if 2.0 * cfg.randomization.friction[0] < self.scene.ground_friction:
-            raise ConfigError(f"randomization.friction[0] must be >= half the floor's coefficient"
-                              f" ({self.scene.ground_friction} in ground.usda), got {cfg.randomization.friction[0]}")
+        check_object_friction("randomization.friction[0]", cfg.randomization.friction[0], self.scene.ground_friction)
         self._make_solver()
         self._make_buffers()
         self._make_params()

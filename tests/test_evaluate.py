@@ -319,6 +319,18 @@ def test_scenario_runs_goal_sequences(policy, tmp_path, capsys):
     assert is_png(tmp_path / "scenario.png") and (tmp_path / "scenario.json").exists()
 
 
+def test_scenario_friction_below_half_the_floor_is_refused_before_anything_is_written(policy, tmp_path, capsys):
+    data = valid_scenario()
+    data["objects"][1].update(friction=0.1)
+    path = tmp_path / "t.yaml"
+    path.write_text(yaml.safe_dump(data))
+    out = tmp_path / "out"
+    assert main(["scenario", str(policy), str(path), "--out", str(out)]) == 2
+    assert "t.objects[1].friction must be >= 0.2 (half the floor's coefficient in ground.usda), got 0.1" in (
+        capsys.readouterr().err)
+    assert not out.exists()
+
+
 def test_footprint_study_on_a_tiny_setting(policy, tmp_path):
     """Goal at the object's start pose: every episode succeeds, so the study completes."""
     cfg = FootprintConfig(sides=(0.3, 0.6), successful_episodes=3, max_rounds=2, num_envs=2,

@@ -123,7 +123,7 @@ def test_invalid_config_names_the_field(cfg, field):
 
 
 def test_friction_range_below_half_the_floor_is_refused():
-    with pytest.raises(ConfigError, match=r"randomization\.friction\[0\]"):
+    with pytest.raises(ConfigError, match=r"randomization\.friction\[0\] must be >= 0\.2 \(half the floor's"):
         PushEnv(PushEnvConfig(num_envs=1, randomization=RandomizationConfig(friction=(0.1, 1.0))))
 
 

@@ -1,5 +1,5 @@
 """``eval.png``: the figure of ``dynpush eval`` from its ``eval.json`` result (Tables I and II beside the paper's,
-time to success, where the episodes end, success by the rotation the goal asks)."""
+time to success, where the episodes end, success by the rotation the goal asks and by where the robot starts)."""
 
 from __future__ import annotations
 
@@ -13,12 +13,14 @@ from .episodes import FirstEpisodes
 def plot_eval(result: dict, time_to_success: np.ndarray, final: tuple[np.ndarray, np.ndarray], episodes: FirstEpisodes,
               path: Path) -> None:
     """Table II beside the paper's values, Table I (success/toppled) beside the paper's, time to success, where the
-    episodes end (``final``: distance [m] and rotation error [deg] to the goal) and success by the rotation asked."""
+    episodes end (``final``: distance [m] and rotation error [deg] to the goal), success by the rotation asked and by
+    where the robot starts."""
     from matplotlib.figure import Figure
     from matplotlib.patches import Rectangle
 
-    fig = Figure(figsize=(24, 4.8), layout="constrained")
-    ax_constraints, ax_rates, ax_time, ax_final, ax_asked = fig.subplots(1, 5, width_ratios=(2.2, 1.2, 1.2, 1.2, 1.0))
+    fig = Figure(figsize=(28, 4.8), layout="constrained")
+    ax_constraints, ax_rates, ax_time, ax_final, ax_asked, ax_side = fig.subplots(
+        1, 6, width_ratios=(2.2, 1.2, 1.2, 1.2, 1.0, 1.0))
     names = list(result["constraint_violation_percent"])
     x = np.arange(len(names))
     ours = [result["constraint_violation_percent"][n] for n in names]
@@ -73,14 +75,17 @@ def plot_eval(result: dict, time_to_success: np.ndarray, final: tuple[np.ndarray
     ax_final.set_title("Where episodes end (box: success tolerance)")
     ax_final.legend(fontsize=7, markerscale=3)
 
-    bins = result["goal_error"]["success_by_goal_rotation_deg"]
-    labels = [f"{b['from']:.0f}-{min(b['to'], 180.0):.0f}" for b in bins]
-    drawn = ax_asked.bar(labels, [np.nan if b["success_rate"] is None else b["success_rate"] for b in bins], color="tab:green")
-    ax_asked.bar_label(drawn, labels=[f"{b['episodes']}" for b in bins], fontsize=7)
-    ax_asked.set_ylim(0, 105)
-    ax_asked.set_xlabel("rotation the goal asks [deg]")
-    ax_asked.set_ylabel("success [%] (bar label: episodes)")
-    ax_asked.set_title("Success by goal rotation")
+    for ax, key, xlabel, title in (
+            (ax_asked, "success_by_goal_rotation_deg", "rotation the goal asks [deg]", "Success by goal rotation"),
+            (ax_side, "success_by_start_side_deg", "robot start, from behind the object [deg]", "Success by start side")):
+        bins = result["goal_error"][key]
+        labels = [f"{b['from']:.0f}-{min(b['to'], 180.0):.0f}" for b in bins]
+        drawn = ax.bar(labels, [np.nan if b["success_rate"] is None else b["success_rate"] for b in bins], color="tab:green")
+        ax.bar_label(drawn, labels=[f"{b['episodes']}" for b in bins], fontsize=7)
+        ax.set_ylim(0, 105)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("success [%] (bar label: episodes)")
+        ax.set_title(title)
     noise = "on" if result["config"]["env"]["noise"]["enabled"] else "off"
     fig.suptitle(f"{result['policy']}: {result['episodes']} episodes of {result['config']['env']['episode_length_s']:g} s,"
                  f" observation noise {noise}")

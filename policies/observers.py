@@ -94,16 +94,30 @@ class ContactMotionObserver:
 
 GOAL_ANGLE_BINS_DEG = (0.0, 30.0, 90.0, 150.0, 180.01)  # the rotation a goal asks of the object (ours)
 GOAL_DISTANCE_BINS_M = (0.0, 0.5, 1.0, 1.5, 2.01)  # the goal's distance from the object's start (III-B: r <= 2 m)
+START_SIDE_BINS_DEG = (0.0, 45.0, 90.0, 135.0, 180.01)  # where the robot starts around the object (ours, start_side)
+
+
+def start_side(base_xy: np.ndarray, object_xy: np.ndarray, goal_xy: np.ndarray) -> np.ndarray:
+    """Angle [rad] at the object between the robot base and the side opposite the goal, in the floor plane (world
+    frame, (n, 2) positions in m): 0 when the robot starts behind the object as seen from the goal, where one walk
+    forward pushes it there, pi when it starts between the object and the goal and must walk round the object
+    first. NaN for a goal on the object's start position or a base above it."""
+    behind, robot = object_xy - goal_xy, base_xy - object_xy
+    norms = np.linalg.norm(behind, axis=1) * np.linalg.norm(robot, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cosine = np.where(norms > 1e-9, np.sum(behind * robot, axis=1) / norms, np.nan)
+    return np.arccos(np.clip(cosine, -1.0, 1.0))
 
 
 class GoalErrorObserver:
     """Per world: the object's distance [m] and rotation angle [rad] to its goal (the success test's quantities) at
     the first step, what the goal asks, and at the last step before the first episode ends (one control step
-    before its end: at the ending step the world is already reset)."""
+    before its end: at the ending step the world is already reset); and the robot's :func:`start_side` [rad] at
+    the first step."""
 
     def __init__(self, env: PushEnv, count: int):
         self.env, self.probe, self.count = env, EnvProbe(env), count
-        self.asked_distance = self.asked_angle = self.final_distance = self.final_angle = None
+        self.asked_distance = self.asked_angle = self.final_distance = self.final_angle = self.start_side = None
 
     def _to_goal(self) -> tuple[np.ndarray, np.ndarray]:
         obj, task = self.probe.object(), self.env.task
@@ -114,6 +128,8 @@ class GoalErrorObserver:
         distance, angle = self._to_goal()
         if self.asked_distance is None:
             self.asked_distance, self.asked_angle = distance, angle
+            self.start_side = start_side(self.probe.base()[:, :2], self.probe.object()[:, :2],
+                                         self.env.task.goal_pos.numpy()[:, :2])
             self.final_distance, self.final_angle = distance.copy(), angle.copy()
         continuing = continuing.cpu().numpy()
         self.final_distance = np.where(continuing, distance, self.final_distance)
@@ -130,7 +146,7 @@ class GoalErrorObserver:
         """How the episodes end (percent of all episodes): success, toppled, at the goal with the rotation off,
         rotation right but away from the goal, both off; the rotation error of those at the goal, and the
         success rate per bin of the rotation and the distance the goal asks (``GOAL_ANGLE_BINS_DEG``,
-        ``GOAL_DISTANCE_BINS_M``)."""
+        ``GOAL_DISTANCE_BINS_M``) and of where the robot starts (``START_SIDE_BINS_DEG``)."""
         def pooled(name: str) -> np.ndarray:
             return GoalErrorObserver.pooled(observers, name)
 
@@ -154,6 +170,7 @@ class GoalErrorObserver:
             "rotation_error_deg_at_goal_rotation_off": describe(np.degrees(angle[at_goal_rotation_off])),
             "success_by_goal_rotation_deg": by_bins(pooled("asked_angle"), GOAL_ANGLE_BINS_DEG, 180.0 / math.pi),
             "success_by_goal_distance_m": by_bins(pooled("asked_distance"), GOAL_DISTANCE_BINS_M, 1.0),
+            "success_by_start_side_deg": by_bins(pooled("start_side"), START_SIDE_BINS_DEG, 180.0 / math.pi),
         }
 
 

@@ -69,6 +69,7 @@ def test_eval_writes_tables_json_and_png(policy, tmp_path):
         "rotation_right_away_from_goal"] + outcome["away_from_goal_rotation_off"] == pytest.approx(100.0)
     assert sum(row["episodes"] for row in saved["goal_error"]["success_by_goal_rotation_deg"]) == 12
     assert sum(row["episodes"] for row in saved["goal_error"]["success_by_goal_distance_m"]) == 12
+    assert sum(row["episodes"] for row in saved["goal_error"]["success_by_start_side_deg"]) == 12
     assert is_png(tmp_path / "eval.png")
 
 
@@ -86,6 +87,10 @@ def test_goal_errors_of_hand_made_episodes(small_env):
 
     class Probe:
         t = 0
+
+        def base(self):  # behind world 0's object as seen from its goal, beside 1's, between 2's and its goal, 3's at 45 deg
+            xy = [[-1.0, 0.0], [0.1, 2.0], [2.0, 0.0], [-0.95, -1.0]]  # the objects start at (0.1, 0) and (0.05, 0)
+            return np.array([[x, y, 0.5, 0.0, 0.0, 0.0, 1.0] for x, y in xy])
 
         def object(self):
             share = self.t / steps
@@ -121,6 +126,17 @@ def test_goal_errors_of_hand_made_episodes(small_env):
     assert [(row["from"], row["episodes"]) for row in rotation_bins] == [(0.0, 0), (30.0, 2), (90.0, 2), (150.0, 0)]
     assert rotation_bins[1]["success_rate"] == 50.0 and rotation_bins[0]["success_rate"] is None
     assert [row["episodes"] for row in summary["success_by_goal_distance_m"]] == [0, 4, 0, 0]
+    np.testing.assert_allclose(np.degrees(observer.start_side), [0.0, 90.0, 180.0, 45.0], atol=1e-6)
+    side_bins = summary["success_by_start_side_deg"]
+    assert [(row["from"], row["episodes"]) for row in side_bins] == [(0.0, 1), (45.0, 1), (90.0, 1), (135.0, 1)]
+    assert [row["success_rate"] for row in side_bins] == [100.0, 0.0, 0.0, 0.0]
+
+
+def test_start_side_is_nan_for_a_goal_on_the_object():
+    from dynpush.policies.observers import start_side
+
+    side = start_side(np.array([[-1.0, 0.0], [2.0, 0.0]]), np.zeros((2, 2)), np.array([[0.0, 0.0], [1.0, 1.0]]))
+    assert np.isnan(side[0]) and np.degrees(side[1]) == pytest.approx(135.0)
 
 
 def test_returns_to_go_of_hand_made_episodes():
@@ -171,6 +187,10 @@ def test_contact_motion_of_hand_made_trajectories(small_env):
 
     class Probe:
         t = 0
+
+        def base(self):  # behind world 0's object as seen from its goal, beside 1's, between 2's and its goal, 3's at 45 deg
+            xy = [[-1.0, 0.0], [0.1, 2.0], [2.0, 0.0], [-0.95, -1.0]]  # the objects start at (0.1, 0) and (0.05, 0)
+            return np.array([[x, y, 0.5, 0.0, 0.0, 0.0, 1.0] for x, y in xy])
 
         def object(self):
             xy = 0.5 * np.array([3.0, 4.0]) * (self.t * dt) ** 2 + np.array([0.1, -0.2])

@@ -143,9 +143,8 @@ def replay_in_simulation(record: ChainRecord, policy_path: str, locomotion_polic
         env.load_state_dict(start)
         path = _BasePath(probe)
         outcome = run_first_episodes(env, policy, [path], started=True)
-        steps, toppled = int(outcome.length[0]), bool(outcome.toppled[0])
-        episodes.append({"success": bool(outcome.success[0]), "toppled": toppled, "steps": steps,
-                         "fallen": steps < env.max_episode_length and not toppled,
+        episodes.append({"success": bool(outcome.success[0]), "toppled": bool(outcome.toppled[0]),
+                         "steps": int(outcome.length[0]), "fallen": bool(outcome.fallen[0]),
                          "base_position": np.array(path.positions)})
     return episodes
 

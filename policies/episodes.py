@@ -63,6 +63,7 @@ class FirstEpisodes:
     length: np.ndarray  # control steps in the episode
     success: np.ndarray  # bool: success flag at the last step
     toppled: np.ndarray  # bool: ended by the object toppling
+    fallen: np.ndarray  # bool: ended by the robot falling (base tilt or height, TerminationConfig)
     first_success_step: np.ndarray  # 1-based step of the first success flag, 0 if never
     shape: np.ndarray  # 0 cuboid, 1 cylinder
 
@@ -90,6 +91,7 @@ def run_first_episodes(env: PushEnv, policy: Policy, observers: Sequence[StepObs
     first_success = torch.zeros(n, dtype=torch.long, device=env.device)
     success = torch.zeros(n, dtype=torch.bool, device=env.device)
     toppled = torch.zeros(n, dtype=torch.bool, device=env.device)
+    fallen = torch.zeros(n, dtype=torch.bool, device=env.device)
     for step in range(env.max_episode_length):
         actions = policy(obs.cpu().numpy())
         obs = env.step(torch.from_numpy(actions).to(env.device))[0]["policy"]
@@ -100,6 +102,7 @@ def run_first_episodes(env: PushEnv, policy: Policy, observers: Sequence[StepObs
         first_success[reached] = step + 1
         success[ended] = env.episode_success_t[ended] == 1
         toppled[ended] = env.episode_toppled_t[ended] == 1
+        fallen[ended] = env.episode_fallen_t[ended] == 1
         for observer in observers:
             observer.observe(step, in_episode, continuing)
         in_episode = continuing
@@ -108,4 +111,4 @@ def run_first_episodes(env: PushEnv, policy: Policy, observers: Sequence[StepObs
     if bool(in_episode.any()):
         raise RuntimeError("a world's first episode outlasted the episode length (environment time-out broken)")
     return FirstEpisodes(length=length.cpu().numpy(), success=success.cpu().numpy(), toppled=toppled.cpu().numpy(),
-                         first_success_step=first_success.cpu().numpy(), shape=shape)
+                         fallen=fallen.cpu().numpy(), first_success_step=first_success.cpu().numpy(), shape=shape)

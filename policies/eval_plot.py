@@ -63,9 +63,10 @@ def plot_eval(result: dict, time_to_success: np.ndarray, final: tuple[np.ndarray
     distance, angle = final
     success_distance = result["config"]["env"]["rewards"]["success_distance"]
     success_angle = result["config"]["env"]["rewards"]["success_angle_deg"]
-    failed = ~episodes.success & ~episodes.toppled
+    fell = episodes.fallen & ~episodes.success & ~episodes.toppled
+    failed = ~episodes.success & ~episodes.toppled & ~fell
     for mask, label, color in ((episodes.success, "success", "tab:green"), (failed, "failed", "tab:red"),
-                               (episodes.toppled, "toppled", "k")):
+                               (episodes.toppled, "toppled", "k"), (fell, "robot fell", "tab:purple")):
         ax_final.scatter(np.maximum(distance[mask], 1e-3), angle[mask], s=4, alpha=0.5, color=color,
                          label=f"{label} ({int(mask.sum())})")
     ax_final.add_patch(Rectangle((1e-3, 0.0), success_distance - 1e-3, success_angle, fill=False, ls="--", color="k"))

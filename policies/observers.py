@@ -143,15 +143,16 @@ class GoalErrorObserver:
     @staticmethod
     def summary(observers: list[GoalErrorObserver], episodes: FirstEpisodes, success_distance: float,
                 success_angle: float) -> dict:
-        """How the episodes end (percent of all episodes): success, toppled, at the goal with the rotation off,
-        rotation right but away from the goal, both off; the rotation error of those at the goal, and the
+        """How the episodes end (percent of all episodes): success, toppled, the robot fallen (the object upright),
+        and of the others at the goal with the rotation off, rotation right but away from the goal, both off; the rotation error of those at the goal, and the
         success rate per bin of the rotation and the distance the goal asks (``GOAL_ANGLE_BINS_DEG``,
         ``GOAL_DISTANCE_BINS_M``) and of where the robot starts (``START_SIDE_BINS_DEG``)."""
         def pooled(name: str) -> np.ndarray:
             return GoalErrorObserver.pooled(observers, name)
 
         distance, angle = pooled("final_distance"), pooled("final_angle")
-        failed = ~episodes.success & ~episodes.toppled
+        fell = episodes.fallen & ~episodes.success & ~episodes.toppled
+        failed = ~episodes.success & ~episodes.toppled & ~fell
         near, aligned = distance <= success_distance, angle <= success_angle
         at_goal_rotation_off = failed & near & ~aligned
 
@@ -164,6 +165,7 @@ class GoalErrorObserver:
 
         return {
             "outcome_percent": {"success": percent(episodes.success), "toppled": percent(episodes.toppled),
+                                "robot_fell": percent(fell),
                                 "at_goal_rotation_off": percent(at_goal_rotation_off),
                                 "rotation_right_away_from_goal": percent(failed & ~near & aligned),
                                 "away_from_goal_rotation_off": percent(failed & ~near & ~aligned)},

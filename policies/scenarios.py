@@ -125,7 +125,7 @@ def run_scenario(policy_path: Path, scenario: Scenario, out_dir: Path, noise: bo
             xy[done | ended] = np.nan
             paths.append(xy)
             toppled = env.episode_toppled_t.cpu().numpy() == 1
-            for w in np.flatnonzero(ended):  # the environment reset this world: its object is gone
+            for w in np.flatnonzero(ended):  # the environment reset this world (toppled, fallen or diverged)
                 records.append(GoalRecord(objects[w].name, worlds[w][1], int(goal_index[w]),
                                           "toppled" if toppled[w] else "fallen", float(goal_step[w] * dt),
                                           None, None))

@@ -291,13 +291,13 @@ class SimRobot:
                     observer.observe(episode_steps - 1, torch.tensor([True]), torch.tensor([not ended]))
                 if ended:
                     results += 1
-                    timed_out, toppled = bool(env.time_out_t[0]), bool(env.episode_toppled_t[0])
+                    toppled, fallen = bool(env.episode_toppled_t[0]), bool(env.episode_fallen_t[0])
                     success = int(env.episode_success_t[0]) == 1
                     rows.append(episode_row(setup, self.dt, success, toppled, episode_steps, first_success))
                     if observer is not None:
                         paths.append(observer.paths)
                     emit({"event": "episode", "index": results - 1, **rows[-1], "first_success_step": first_success,
-                          "steps": episode_steps, "fallen": not (timed_out or toppled)})
+                          "steps": episode_steps, "fallen": fallen})
                     episode_steps, first_success = 0, 0
                     if results < self.cfg.episodes:
                         self.send_goal()

@@ -70,8 +70,10 @@ class ConstraintObserver:
 def table_rates(episodes: FirstEpisodes, violated_steps: np.ndarray) -> dict:
     """Tables I and II of ``episodes``: success and toppled rate [% of episodes] and, per constraint group, the time
     it is violated [% of an episode, mean over episodes]; ``violated_steps`` (episodes, groups) as
-    :class:`ConstraintObserver` counts them."""
+    :class:`ConstraintObserver` counts them. Beside them the rate of episodes ended by the robot falling (ours: the
+    paper's tracked base rarely does, a legged robot may)."""
     return {"success_rate": percent(episodes.success), "toppled_rate": percent(episodes.toppled),
+            "fallen_rate": percent(episodes.fallen),
             "constraint_violation_percent": ConstraintObserver.percent_of_time(violated_steps, episodes.length)}
 
 

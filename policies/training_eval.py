@@ -8,8 +8,8 @@ figures). Every evaluation of a run starts the same episodes (``eval_seed``), so
 policy only. Each line of ``evaluations.jsonl``::
 
     {"iteration": K, "world_steps": ..., "training_hours": ..., "episodes": N,
-     "success_rate": %, "toppled_rate": %, "constraint_violation_percent": {group: %},
-     "outcome_percent": {"success": %, "toppled": %, "at_goal_rotation_off": %, ...}}
+     "success_rate": %, "toppled_rate": %, "fallen_rate": %, "constraint_violation_percent": {group: %},
+     "outcome_percent": {"success": %, "toppled": %, "robot_fell": %, "at_goal_rotation_off": %, ...}}
 
 ``iteration`` K: the actor after K iterations; ``world_steps``: the CaT-PPO world-steps of those K iterations (all
 processes); ``training_hours``: the training wall-clock of those iterations, summed over all launches of the run

@@ -156,6 +156,7 @@ class PushEnv(EnvBase, VecEnv):
         self.episode_success = wp.full(n, -1, dtype=int)
         self.episode_toppled = zeros(n, int)
         self.episode_diverged = zeros(n, int)
+        self.episode_fallen = zeros(n, int)
         self.variant = zeros(n, int)
         self.goal_difficulty = wp.ones(1, dtype=float)  # 1: the paper's goal distribution
         # (low, high) [kg] of the object masses drawn from now on: randomization.mass unless a training curriculum
@@ -199,6 +200,7 @@ class PushEnv(EnvBase, VecEnv):
         self.episode_success_t = t(self.episode_success)
         self.episode_toppled_t = t(self.episode_toppled)
         self.episode_diverged_t = t(self.episode_diverged)
+        self.episode_fallen_t = t(self.episode_fallen)
         self.success_t = t(self.success)
         self.near_goal_ended_t = t(self.near_goal_ended)
 
@@ -443,7 +445,8 @@ class PushEnv(EnvBase, VecEnv):
             self._robot_constraints()
             self._launch(terminations.compute_terminations, [view, self.task, self.termination_params, self.success,
                                                              self.reset_flags, self.time_out, self.episode_success,
-                                                             self.episode_toppled, self.episode_diverged])
+                                                             self.episode_toppled, self.episode_diverged,
+                                                             self.episode_fallen])
             self._reset_flagged()
             self._observe()
 
@@ -630,12 +633,13 @@ class PushEnv(EnvBase, VecEnv):
         return self.episode_success_t >= 0
 
     def _ended_episode_log(self, ended: torch.Tensor) -> dict[str, torch.Tensor]:
-        """Success, toppled and diverged at the end (success counted for :meth:`take_episode_counts`), and the
-        near-goal split."""
+        """Success, toppled, robot fallen and diverged at the end (success counted for :meth:`take_episode_counts`),
+        and the near-goal split."""
         succeeded = (self.episode_success_t[ended] == 1).float()
         self._episodes_ended += int(succeeded.numel())
         self._episodes_succeeded += int(succeeded.sum())
         log = {"/episode/success": succeeded, "/episode/toppled": self.episode_toppled_t[ended].float(),
+               "/episode/fallen": self.episode_fallen_t[ended].float(),
                "/episode/diverged": self.episode_diverged_t[ended].float()}
         log.update(self._near_goal_log(ended, succeeded))
         return log

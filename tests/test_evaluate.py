@@ -1,6 +1,7 @@
 """dynpush eval, scenario, footprints and play: Tables I-II evaluation, scenario files and face switches, footprint
 study, rollout pictures."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -65,8 +66,8 @@ def test_eval_writes_tables_json_and_png(policy, tmp_path):
     assert set(saved["rewards"]["term_means_per_step"]) == set(saved["rewards"]["weights"]) == {
         "task", "reach", "object_velocity", "action_rate"}
     outcome = saved["goal_error"]["outcome_percent"]
-    assert outcome["success"] + outcome["toppled"] + outcome["at_goal_rotation_off"] + outcome[
-        "rotation_right_away_from_goal"] + outcome["away_from_goal_rotation_off"] == pytest.approx(100.0)
+    assert sum(outcome.values()) == pytest.approx(100.0)
+    assert outcome["robot_fell"] <= saved["fallen_rate"]
     assert sum(row["episodes"] for row in saved["goal_error"]["success_by_goal_rotation_deg"]) == 12
     assert sum(row["episodes"] for row in saved["goal_error"]["success_by_goal_distance_m"]) == 12
     assert sum(row["episodes"] for row in saved["goal_error"]["success_by_start_side_deg"]) == 12
@@ -117,10 +118,14 @@ def test_goal_errors_of_hand_made_episodes(small_env):
     np.testing.assert_allclose(np.degrees(observer.final_angle), [0.0, 90.0, 0.0, 90.0], atol=1e-5)
 
     episodes = FirstEpisodes(length=np.full(4, steps), success=np.array([True, False, False, False]),
-                             toppled=np.zeros(4, dtype=bool), first_success_step=np.array([10, 0, 0, 0]), shape=np.zeros(4, dtype=int))
+                             toppled=np.zeros(4, dtype=bool), fallen=np.zeros(4, dtype=bool),
+                             first_success_step=np.array([10, 0, 0, 0]), shape=np.zeros(4, dtype=int))
     summary = GoalErrorObserver.summary([observer], episodes, 0.1, np.radians(10.0))
-    assert summary["outcome_percent"] == {"success": 25.0, "toppled": 0.0, "at_goal_rotation_off": 25.0,
+    assert summary["outcome_percent"] == {"success": 25.0, "toppled": 0.0, "robot_fell": 0.0, "at_goal_rotation_off": 25.0,
                                           "rotation_right_away_from_goal": 25.0, "away_from_goal_rotation_off": 25.0}
+    fell = GoalErrorObserver.summary([observer], dataclasses.replace(episodes, fallen=np.array([True, False, False, True])),
+                                     0.1, np.radians(10.0))["outcome_percent"]  # a success that ends fallen stays one
+    assert (fell["success"], fell["robot_fell"], fell["away_from_goal_rotation_off"]) == (25.0, 25.0, 0.0)
     assert summary["rotation_error_deg_at_goal_rotation_off"]["median"] == pytest.approx(90.0)
     rotation_bins = summary["success_by_goal_rotation_deg"]
     assert [(row["from"], row["episodes"]) for row in rotation_bins] == [(0.0, 0), (30.0, 2), (90.0, 2), (150.0, 0)]

@@ -442,9 +442,9 @@ def test_compute_terminations():
     params = terminations.TerminationParams()
     params.object_topple, params.base_tilt, params.base_min_height, params.max_episode_steps = 1.0, 1.2, 0.25, max_steps
     robot, task = structs(robot_np, task_np)
-    flags = [wp.zeros(n, dtype=int, device=DEVICE) for _ in range(5)]
+    flags = [wp.zeros(n, dtype=int, device=DEVICE) for _ in range(6)]
     launch(terminations.compute_terminations, n, robot, task, params, arr(success0, int), *flags)
-    reset, time_out, episode_success, toppled_out, diverged_out = (f.numpy() for f in flags)
+    reset, time_out, episode_success, toppled_out, diverged_out, fallen_out = (f.numpy() for f in flags)
 
     step = task_np["episode_step"] + 1
     toppled = ~diverged & (tilt(robot_np["body_q"][obj, 3:]) > 1.0)
@@ -453,6 +453,7 @@ def test_compute_terminations():
     done = toppled | fallen | timed_out | diverged
     for label, mask in (("time-out only", timed_out & ~toppled & ~fallen & ~diverged),
                         ("toppled at time-out", timed_out & toppled), ("fallen, not toppled", fallen & ~toppled),
+                        ("fallen and toppled", fallen & toppled),
                         ("diverged before the time-out", diverged & ~timed_out), ("running", ~done)):
         assert mask.any(), f"no world in case {label}"
     np.testing.assert_array_equal(task.episode_step.numpy(), step)
@@ -462,6 +463,7 @@ def test_compute_terminations():
     np.testing.assert_array_equal(episode_success, np.where(done, success0, -1))
     np.testing.assert_array_equal(toppled_out, done & toppled)
     np.testing.assert_array_equal(diverged_out, diverged)
+    np.testing.assert_array_equal(fallen_out, done & fallen)
 
 
 # --------------------------------------------------------------------------- reset sampling (III-B, III-E)

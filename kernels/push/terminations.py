@@ -34,11 +34,13 @@ def compute_terminations(
     episode_success: wp.array(dtype=int),
     episode_toppled: wp.array(dtype=int),
     episode_diverged: wp.array(dtype=int),
+    episode_fallen: wp.array(dtype=int),
 ):
     """Advances the episode counter and flags worlds to reset; ``episode_*`` describe ended episodes.
 
     ``episode_success`` is the success flag at an episode's last step (-1 where no episode ended);
-    ``episode_toppled`` and ``episode_diverged`` are 1 where an episode ended toppled or with the solver diverged.
+    ``episode_toppled``, ``episode_fallen`` and ``episode_diverged`` are 1 where an episode ended with the object
+    toppled, with the robot fallen (both may be) or with the solver diverged.
     """
     w = wp.tid()
     task.episode_step[w] = task.episode_step[w] + 1
@@ -59,3 +61,4 @@ def compute_terminations(
     episode_success[w] = wp.where(done, success[w], -1)
     episode_toppled[w] = wp.where(done and toppled, 1, 0)
     episode_diverged[w] = wp.where(diverged, 1, 0)
+    episode_fallen[w] = wp.where(done and fallen, 1, 0)

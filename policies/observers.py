@@ -144,9 +144,10 @@ class GoalErrorObserver:
     def summary(observers: list[GoalErrorObserver], episodes: FirstEpisodes, success_distance: float,
                 success_angle: float) -> dict:
         """How the episodes end (percent of all episodes): success, toppled, the robot fallen (the object upright),
-        and of the others at the goal with the rotation off, rotation right but away from the goal, both off; the rotation error of those at the goal, and the
-        success rate per bin of the rotation and the distance the goal asks (``GOAL_ANGLE_BINS_DEG``,
-        ``GOAL_DISTANCE_BINS_M``) and of where the robot starts (``START_SIDE_BINS_DEG``)."""
+        and of the others at the goal with the rotation off, rotation right but away from the goal, both off; the
+        rotation error of those at the goal, and the success rate per bin of the rotation and the distance the goal
+        asks (``GOAL_ANGLE_BINS_DEG``, ``GOAL_DISTANCE_BINS_M``) and of where the robot starts
+        (``START_SIDE_BINS_DEG``)."""
         def pooled(name: str) -> np.ndarray:
             return GoalErrorObserver.pooled(observers, name)
 

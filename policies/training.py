@@ -146,10 +146,10 @@ def train(cfg: TaskTrainConfig, run_dir: Path, resume: bool = False, command: st
     A new run needs a folder without a run in it; a resumed run uses its own ``config.json`` and its newest readable
     checkpoint; ``resume_overrides`` may change its length (``iterations=N`` in all; schedules that scale with the run
     length follow it), the PPO update's settings (``ppo.FIELD=VALUE``) and the curricula's thresholds
-    (:func:`is_resumable`), written into its ``config.json`` and recorded with the launch's command. A new run with ``init_from`` (a checkpoint of
-    another run with the same networks, e.g. its ``imitation.pt``) starts from that run's actor and critic with their normalisers; its optimizer
-    (learning rate of ``cfg``), action noise (``cfg.network.init_noise_std``), CaT state, iteration count and
-    episodes are its own. ``init_from`` may also be an exported push ``policy.onnx`` (e.g. the shipped one): the
+    (:func:`is_resumable`), written into its ``config.json`` and recorded with the launch's command. A new run with
+    ``init_from`` (a checkpoint of another run with the same networks, e.g. its ``imitation.pt``) starts from that
+    run's actor and critic with their normalisers; its optimizer (learning rate of ``cfg``), action noise
+    (``cfg.network.init_noise_std``), CaT state, iteration count and episodes are its own. ``init_from`` may also be an exported push ``policy.onnx`` (e.g. the shipped one): the
     actor and its normaliser come from the file, the critic starts fresh and learns during
     ``fine_tune.critic_warmup_iterations`` (required) while the actor is held. Nothing is written into ``run_dir``
     before all of these inputs have been read and checked (policies/run_folder.py).

@@ -173,14 +173,17 @@ def wall_clock_hours(records: list[dict]) -> np.ndarray:
 
 def plot_evaluations(ax, x: np.ndarray, evaluations: list[dict]) -> None:
     """The evaluations during training (``evaluations.jsonl``) at ``x``: success and toppled rate [% of episodes], the
-    episodes that end at the goal with the rotation off (where recorded) and, on a right-hand axis, the time the most
-    violated constraint group is violated [% of an episode]."""
+    episodes that end at the goal with the rotation off and those that end with the robot fallen (where recorded)
+    and, on a right-hand axis, the time the most violated constraint group is violated [% of an episode]."""
     ax.plot(x, [e["success_rate"] for e in evaluations], "o-", color="tab:green", ms=3,
             label=f"evaluation: success ({evaluations[-1]['episodes']} episodes)")
     ax.plot(x, [e["toppled_rate"] for e in evaluations], "o-", color="tab:red", ms=3, label="evaluation: toppled")
     rotation_off = [e.get("outcome_percent", {}).get("at_goal_rotation_off", np.nan) for e in evaluations]
     if not np.isnan(rotation_off).all():  # evaluations before this figure was recorded have none
         ax.plot(x, rotation_off, "o:", color="tab:orange", ms=3, label="evaluation: at the goal, rotation off")
+    fallen = np.array([e.get("fallen_rate", np.nan) for e in evaluations], dtype=float)
+    if np.nanmax(fallen, initial=0.0) > 0.0:  # recorded later; a tracked base that never falls draws no line
+        ax.plot(x, fallen, "o:", color="tab:brown", ms=3, label="evaluation: robot fell")
     ax.set_ylabel("% of episodes")
     ax.set_ylim(-2, 102)
     ax.legend(fontsize=8, loc="upper left")

@@ -67,6 +67,16 @@ class FirstEpisodes:
     first_success_step: np.ndarray  # 1-based step of the first success flag, 0 if never
     shape: np.ndarray  # 0 cuboid, 1 cylinder
 
+    @property
+    def fell(self) -> np.ndarray:
+        """bool: ended by the robot falling, neither a success nor with the object toppled."""
+        return self.fallen & ~self.success & ~self.toppled
+
+    @property
+    def failed(self) -> np.ndarray:
+        """bool: neither a success nor toppled nor fallen (the episode ran out of time or diverged)."""
+        return ~self.success & ~self.toppled & ~self.fallen
+
     @staticmethod
     def concatenate(parts: list[FirstEpisodes], count: int) -> FirstEpisodes:
         """The first ``count`` worlds of several rounds."""

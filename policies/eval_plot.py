@@ -63,8 +63,7 @@ def plot_eval(result: dict, time_to_success: np.ndarray, final: tuple[np.ndarray
     distance, angle = final
     success_distance = result["config"]["env"]["rewards"]["success_distance"]
     success_angle = result["config"]["env"]["rewards"]["success_angle_deg"]
-    fell = episodes.fallen & ~episodes.success & ~episodes.toppled
-    failed = ~episodes.success & ~episodes.toppled & ~fell
+    fell, failed = episodes.fell, episodes.failed
     for mask, label, color in ((episodes.success, "success", "tab:green"), (failed, "failed", "tab:red"),
                                (episodes.toppled, "toppled", "k"), (fell, "robot fell", "tab:purple")):
         ax_final.scatter(np.maximum(distance[mask], 1e-3), angle[mask], s=4, alpha=0.5, color=color,

@@ -119,17 +119,17 @@ class GoalErrorObserver:
         self.env, self.probe, self.count = env, EnvProbe(env), count
         self.asked_distance = self.asked_angle = self.final_distance = self.final_angle = self.start_side = None
 
-    def _to_goal(self) -> tuple[np.ndarray, np.ndarray]:
-        obj, task = self.probe.object(), self.env.task
+    def _to_goal(self, obj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        task = self.env.task
         distance = np.linalg.norm(task.goal_pos.numpy() - obj[:, :3], axis=1)
         return distance, rotation_angle(obj[:, 3:], task.goal_quat.numpy())
 
     def observe(self, step: int, in_episode: torch.Tensor, continuing: torch.Tensor) -> None:
-        distance, angle = self._to_goal()
+        obj = self.probe.object()
+        distance, angle = self._to_goal(obj)
         if self.asked_distance is None:
             self.asked_distance, self.asked_angle = distance, angle
-            self.start_side = start_side(self.probe.base()[:, :2], self.probe.object()[:, :2],
-                                         self.env.task.goal_pos.numpy()[:, :2])
+            self.start_side = start_side(self.probe.base()[:, :2], obj[:, :2], self.env.task.goal_pos.numpy()[:, :2])
             self.final_distance, self.final_angle = distance.copy(), angle.copy()
         continuing = continuing.cpu().numpy()
         self.final_distance = np.where(continuing, distance, self.final_distance)
@@ -152,8 +152,7 @@ class GoalErrorObserver:
             return GoalErrorObserver.pooled(observers, name)
 
         distance, angle = pooled("final_distance"), pooled("final_angle")
-        fell = episodes.fallen & ~episodes.success & ~episodes.toppled
-        failed = ~episodes.success & ~episodes.toppled & ~fell
+        fell, failed = episodes.fell, episodes.failed
         near, aligned = distance <= success_distance, angle <= success_angle
         at_goal_rotation_off = failed & near & ~aligned
 

@@ -7,10 +7,10 @@ with the runtime's own datagrams (``dynpush.runtime.packets``):
 - **commands in** (``DPC1``): the onboard locomotion is the tracked base, so the 6D base command and
   the 5 arm targets go to the PushEnv as its own commands (``PushEnv.step_commands``: the runtime applied the action
   mapping, the environment does not apply it again, and clamps them to its command limits as it clamps its own;
-  the policy's contract must still hold the environment's parameters). The packets carry no policy actions, so the environment's action terms (its ``last_actions``
-  observation, action-rate reward and arm-rate constraint) see a policy at rest; nothing here reads them. Mode
-  stop (or no command yet): the default base command (zero velocities), arm targets at the measured joint
-  positions.
+  the policy's contract must still hold the environment's parameters). The packets carry no policy actions, so the
+  environment's action terms (its ``last_actions`` observation, action-rate reward and arm-rate constraint) see a
+  policy at rest; nothing here reads them. Mode stop (or no command yet): the default base command (zero
+  velocities), arm targets at the measured joint positions.
 - **mocap out** (``DPM1``), once per control step: base and object poses (world Z-up, m, (x, y, z, w))
   plus Gaussian position noise (``mocap_noise_m`` std per axis) and a random rotation (rotation vector
   with ``mocap_noise_rad`` std per axis); each frame dropped with probability ``drop`` and delivered

@@ -149,10 +149,11 @@ def train(cfg: TaskTrainConfig, run_dir: Path, resume: bool = False, command: st
     (:func:`is_resumable`), written into its ``config.json`` and recorded with the launch's command. A new run with
     ``init_from`` (a checkpoint of another run with the same networks, e.g. its ``imitation.pt``) starts from that
     run's actor and critic with their normalisers; its optimizer (learning rate of ``cfg``), action noise
-    (``cfg.network.init_noise_std``), CaT state, iteration count and episodes are its own. ``init_from`` may also be an exported push ``policy.onnx`` (e.g. the shipped one): the
-    actor and its normaliser come from the file, the critic starts fresh and learns during
-    ``fine_tune.critic_warmup_iterations`` (required) while the actor is held. Nothing is written into ``run_dir``
-    before all of these inputs have been read and checked (policies/run_folder.py).
+    (``cfg.network.init_noise_std``), CaT state, iteration count and episodes are its own. ``init_from`` may also
+    be an exported push ``policy.onnx`` (e.g. the shipped one): the actor and its normaliser come from the file, the
+    critic starts fresh and learns during ``fine_tune.critic_warmup_iterations`` (required) while the actor is held.
+    Nothing is written into ``run_dir`` before all of these inputs have been read and checked
+    (policies/run_folder.py).
 
     ``hours``: this launch ends at the last iteration boundary before ``hours`` from ``started`` (``time.time()``
     of the launch; default: now), with a checkpoint that ``--resume`` continues.

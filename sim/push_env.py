@@ -346,8 +346,8 @@ class PushEnv(EnvBase, VecEnv):
         [rad] go where the action mapping writes its own (``task.base_command``, ``task.arm_command``), unscaled, and
         are sent to the robot as the mapped ones are, clamped to the command limits (kernel ``apply_commands``). The
         action terms (the policy observation's ``last_actions``, the action-rate reward and the arm-rate constraint)
-        are about the policy's output, which commands do not carry: ``actions`` (num_envs, 11), the raw policy output behind the commands if the caller has
-        it, are recorded as :meth:`step` records its own (so that ``step_commands(*action_mapping.commands(a), a)`` is
+        are about the policy's output, which commands do not carry: ``actions`` (num_envs, 11), the raw policy output
+        behind the commands if the caller has it, are recorded as :meth:`step` records its own (so that ``step_commands(*action_mapping.commands(a), a)`` is
         ``step(a)``); without them the history records zeros, a policy at rest, and those terms do not describe the
         commands. Commands must be finite.
         """

@@ -4,7 +4,8 @@ The kernels ``process_actions`` (push policy) and ``process_leg_actions`` (locom
 actions with random parameters and compared with the runtime's :class:`ActionMapping` / :class:`ActionScaling` of
 the same parameters, and what ``process_actions`` sends to the robot with what the runtime's safety layer sends
 (:class:`~dynpush.runtime.safety.CommandLimits`); the push environment is checked to launch its kernel with its own
-``action_mapping``. (The kernels' independent references from the paper are in test_kernels.py and test_locomotion_kernels.py.)
+``action_mapping``. (The kernels' independent references from the paper are in test_kernels.py and
+test_locomotion_kernels.py.)
 """
 
 import numpy as np

@@ -193,10 +193,6 @@ def test_contact_motion_of_hand_made_trajectories(small_env):
     class Probe:
         t = 0
 
-        def base(self):  # behind world 0's object as seen from its goal, beside 1's, between 2's and its goal, 3's at 45 deg
-            xy = [[-1.0, 0.0], [0.1, 2.0], [2.0, 0.0], [-0.95, -1.0]]  # the objects start at (0.1, 0) and (0.05, 0)
-            return np.array([[x, y, 0.5, 0.0, 0.0, 0.0, 1.0] for x, y in xy])
-
         def object(self):
             xy = 0.5 * np.array([3.0, 4.0]) * (self.t * dt) ** 2 + np.array([0.1, -0.2])
             return np.tile(np.concatenate([xy, [0.3, 0, 0, 0, 1]]), (4, 1))

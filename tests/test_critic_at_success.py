@@ -1,0 +1,64 @@
+"""`benchmarks/critic_at_success.py`: the success margins it reads from the critic's observation, its discounted
+returns and its transition groups, against hand-made inputs (no simulation)."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+
+def axis_angle_matrix(axis, angle):
+    """Rodrigues' rotation matrix (numpy), independent of the code under test."""
+    x, y, z = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * k @ k
+
+
+def test_success_margins_read_distance_and_rotation_angle(load_benchmark):
+    """Distance is the norm of ``object_to_goal_b``, the angle that of the rotation ``goal_rotation_o`` (row-major),
+    found by name in the layout whatever comes before them."""
+    bench = load_benchmark("critic_at_success")
+    terms = (("before", 2), ("object_to_goal_b", 3), ("goal_rotation_o", 9), ("after", 1))
+    rng = np.random.default_rng(0)
+    rows, expected = [], []
+    for angle in (0.0, 0.1, 0.5, 2.0, math.pi - 1e-3):
+        offset = rng.normal(size=3) * 0.2
+        rotation = axis_angle_matrix(rng.normal(size=3), angle)
+        rows.append(np.concatenate([rng.normal(size=2), offset, rotation.reshape(-1), rng.normal(size=1)]))
+        expected.append((np.linalg.norm(offset), angle))
+    distance, angle = bench.success_margins(torch.tensor(np.array(rows), dtype=torch.float64), terms)
+    np.testing.assert_allclose(distance.numpy(), [d for d, _ in expected], atol=1e-9)
+    np.testing.assert_allclose(angle.numpy(), [a for _, a in expected], atol=2e-4)
+
+
+def test_discounted_returns(load_benchmark):
+    """``G_t = r_t + gamma c_t G_{t+1}`` with ``G_T = 0``: a loop in numpy over two worlds, one of which terminates
+    (c = 0) and one of which is softly terminated by CaT (c = 0.5)."""
+    bench = load_benchmark("critic_at_success")
+    rewards = np.array([[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]])
+    continues = np.array([[1.0, 0.5], [0.0, 1.0], [1.0, 1.0]])
+    gamma = 0.9
+    expected = np.zeros_like(rewards)
+    for w in range(2):
+        following = 0.0
+        for t in (2, 1, 0):
+            following = rewards[t, w] + gamma * continues[t, w] * following
+            expected[t, w] = following
+    returns = bench.discounted_returns(torch.tensor(rewards), torch.tensor(continues), gamma)
+    np.testing.assert_allclose(returns.numpy(), expected)
+    assert returns[1, 0] == pytest.approx(3.0)  # the episode ended after step 1: nothing of step 2 flows back
+
+
+def test_transition_groups_partition_the_valid_transitions(load_benchmark):
+    bench = load_benchmark("critic_at_success")
+    before = torch.tensor([0, 0, 1, 1, 0, 1])
+    after = torch.tensor([1, 0, 0, 1, 1, 1])
+    valid = torch.tensor([True, True, True, True, False, False])
+    groups = bench.transition_groups(before, after, valid)
+    assert groups["enter"].tolist() == [True, False, False, False, False, False]
+    assert groups["stay_out"].tolist() == [False, True, False, False, False, False]
+    assert groups["leave"].tolist() == [False, False, True, False, False, False]
+    assert groups["stay_in"].tolist() == [False, False, False, True, False, False]
+    union = sum(mask.int() for mask in groups.values())
+    assert union.tolist() == valid.int().tolist()

@@ -76,6 +76,17 @@ class Evaluation(Protocol):
         """Evaluates ``actor`` after ``iteration`` iterations."""
 
 
+def check_shapes(path: str, model: str, expected: dict[str, torch.Tensor], saved: dict[str, torch.Tensor]) -> None:
+    """Raises a CheckpointError naming the first tensor of ``model`` whose shape in the checkpoint ``path`` differs
+    from this run's (before anything is loaded): another network size, or another observation layout."""
+    for name, tensor in expected.items():
+        if name in saved and tuple(saved[name].shape) != tuple(tensor.shape):
+            raise CheckpointError(
+                f"checkpoint {path}: {model} {name} has shape {tuple(saved[name].shape)}, this run's "
+                f"{tuple(tensor.shape)}: the networks' sizes and inputs must match (network.actor_hidden, "
+                f"network.critic_hidden, env.critic_reads_object_at_goal)")
+
+
 class CaTOnPolicyRunner(OnPolicyRunner):
     """On-policy runner for CaT-PPO with per-iteration schedules and exact resume.
 
@@ -397,6 +408,9 @@ class CaTOnPolicyRunner(OnPolicyRunner):
         for key in ("actor_state_dict", "critic_state_dict", "iter"):
             if key not in loaded:
                 raise CheckpointError(f"checkpoint {path} is not a dynpush training checkpoint (missing {key!r})")
+        for model in ("actor", "critic"):
+            if load_cfg is None or load_cfg.get(model):
+                check_shapes(path, model, getattr(self.alg, model).state_dict(), loaded[f"{model}_state_dict"])
         if self.alg.load(loaded, load_cfg, strict):
             self.current_learning_iteration = loaded["iter"]
         infos = loaded.get("infos") or {}

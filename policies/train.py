@@ -156,8 +156,12 @@ class TrainConfig:
     def from_dict(data: dict) -> TrainConfig:
         """The config of a ``config.json`` (or an exported policy's ``training_config``). Runs written before the
         ``fine_tune`` section existed hold its fields at the top level (``MOVED_FIELDS``): they are read into it, with
-        the same values; the caller's dict is left unchanged."""
+        the same values; runs written before the critic read ``object_at_goal`` lack
+        ``env.critic_reads_object_at_goal``: it reads as False, their critic's input. The caller's dict is left
+        unchanged."""
         data = dict(data)
+        if isinstance(data.get("env"), dict) and "critic_reads_object_at_goal" not in data["env"]:
+            data["env"] = {**data["env"], "critic_reads_object_at_goal": False}
         moved = {name: data.pop(name) for name in MOVED_FIELDS if name in data}
         if moved:
             section = dict(data.get("fine_tune", {}))

@@ -7,6 +7,7 @@ import argparse
 
 def _env_info(args: argparse.Namespace) -> int:
     from dynpush.kernels.push.observations import POLICY_TERMS, PRIVILEGED_TERMS
+    from dynpush.kernels.push.views import NUM_CRITIC_OBS
 
     from .config import PushEnvConfig, SimConfig
     from .push_env import PushEnv
@@ -22,7 +23,9 @@ def _env_info(args: argparse.Namespace) -> int:
         f"episode           {env.cfg.episode_length_s:.0f} s = {env.max_episode_length} steps",
         f"actions           {env.num_actions} = (vx, vy, yaw rate, roll, pitch, height) + 5 arm joints",
         "observations      policy 54 = " + ", ".join(f"{n} {s}" for n, s in POLICY_TERMS),
-        "                  critic 73 = policy (noiseless) + " + ", ".join(f"{n} {s}" for n, s in PRIVILEGED_TERMS),
+        f"                  critic {NUM_CRITIC_OBS} = policy (noiseless) + "
+        + ", ".join(f"{n} {s}" for n, s in PRIVILEGED_TERMS)
+        + f"; the critic reads {len(env.critic_input_columns)} of them (not last_actions)",
         "constraints       " + ", ".join(f"{n} {s}" for n, s in env.constraint_groups)
         + f" (= {env.constraints_t.shape[1]})",
     ]

@@ -345,6 +345,9 @@ class PushEnvConfig:
     constraints: ConstraintConfig = field(default_factory=ConstraintConfig)
     terminations: TerminationConfig = field(default_factory=TerminationConfig)
     legged: LeggedModeConfig = field(default_factory=LeggedModeConfig)
+    # Ours: the critic also reads whether the object is at its goal (kernels/push/observations.py says why). Configs
+    # of runs started before it existed read as False (TrainConfig.from_dict), so that those runs resume as they were.
+    critic_reads_object_at_goal: bool = True
 
     @property
     def max_episode_steps(self) -> int:
@@ -352,6 +355,8 @@ class PushEnvConfig:
 
     def validate(self) -> PushEnvConfig:
         validate_env(self)
+        if not isinstance(self.critic_reads_object_at_goal, bool):
+            raise ConfigError(f"critic_reads_object_at_goal must be True or False, got {self.critic_reads_object_at_goal!r}")
         # Older runs' configs carry the locomotion task's buffers in the legged section, unused while it is off.
         if self.legged.enabled and self.legged.mujoco.nconmax < self.sim.contacts_per_world:
             raise ConfigError(f"legged.mujoco.nconmax ({self.legged.mujoco.nconmax}) must be >= sim.contacts_per_world "

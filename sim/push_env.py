@@ -196,7 +196,8 @@ class PushEnv(EnvBase, VecEnv):
         # Zero-copy torch views.
         t = wp.to_torch
         self.command_base_t, self.command_arm_t = t(self.command_base), t(self.command_arm)
-        self.critic_input_columns = torch.tensor(observations_k.critic_input_columns(), device=self.critic_obs_t.device)
+        self.critic_input_columns = torch.tensor(observations_k.critic_input_columns(self.cfg.critic_reads_object_at_goal),
+                                                 device=self.critic_obs_t.device)
         self.episode_success_t = t(self.episode_success)
         self.episode_toppled_t = t(self.episode_toppled)
         self.episode_diverged_t = t(self.episode_diverged)
@@ -535,6 +536,7 @@ class PushEnv(EnvBase, VecEnv):
     def _observe(self) -> None:
         self._launch(observations_k.compute_observations, [self.views[0], self.task, self.noise_scale,
                                                            int(self.cfg.noise.enabled), self.cfg.seed,
+                                                           float(self.cfg.rewards.success_distance), self.success_angle,
                                                            self.policy_obs, self.critic_obs])
 
     # ------------------------------------------------------------------ checkpointing

@@ -16,7 +16,7 @@ import warp as wp
 from dynpush.kernels.push.observations import POLICY_TERMS, PRIVILEGED_TERMS, compute_observations
 from dynpush.kernels.push.views import CONTACT_COLUMNS, EE_CONTACT, NUM_CRITIC_OBS, NUM_POLICY_OBS, PushTask, RobotView
 from dynpush.runtime.observation import POLICY_OBSERVATION_LAYOUT, POLICY_OBSERVATION_SIZE, policy_observation
-from warp_numpy_helpers import DEVICE, make_struct, quat_rotate, quat_rotate_inv, random_quat
+from warp_numpy_helpers import DEVICE, axis_angle_quat, make_struct, quat_mul, quat_rotate, quat_rotate_inv, random_quat
 
 wp.config.quiet = True
 STRIDE = 3  # bodies per world: object, base, end-effector link
@@ -28,12 +28,7 @@ PAPER_NOISE = {
     "object_to_goal_b": 0.02, "goal_rotation_o": 0.01, "last_actions": 0.0,
 }
 NOISE_SCALE = np.concatenate([np.full(size, PAPER_NOISE[name]) for name, size in POLICY_TERMS]).astype(np.float32)
-
-
-
-
-
-
+SUCCESS_DISTANCE, SUCCESS_ANGLE = 0.1, np.radians(10.0)  # [m], [rad]: the paper's success rule (III-B)
 
 
 def random_worlds(rng, n):
@@ -51,8 +46,16 @@ def random_worlds(rng, n):
         robot_body_count=2, ee_offset=rng.uniform(-0.1, 0.1, 3),
     )
     shape = rng.integers(0, 2, n)
+    # Half the goals near their objects, on both sides of the success distance and angle.
+    x_o = robot["body_q"][w * STRIDE]
+    goal_pos, goal_quat = rng.uniform(-2.0, 2.0, (n, 3)), random_quat(rng, n)
+    near = w[: n // 2]
+    offset = rng.uniform(0.0, 2.0 * SUCCESS_DISTANCE, (len(near), 1))
+    goal_pos[near] = x_o[near, :3] + random_direction(rng, len(near)) * offset
+    goal_quat[near] = quat_mul(x_o[near, 3:], axis_angle_quat(random_direction(rng, len(near)),
+                                                              rng.uniform(0.0, 2.0 * SUCCESS_ANGLE, len(near))))
     task = dict(
-        goal_pos=rng.uniform(-2.0, 2.0, (n, 3)), goal_quat=random_quat(rng, n), object_dims=rng.uniform(0.25, 1.0, (n, 3)),
+        goal_pos=goal_pos, goal_quat=goal_quat, object_dims=rng.uniform(0.25, 1.0, (n, 3)),
         object_shape=shape, object_mass=rng.uniform(1.0, 10.0, n), object_com_o=rng.uniform(-0.2, 0.2, (n, 3)),
         object_inertia=rng.uniform(0.05, 1.0, (n, 3)), arm_default=rng.uniform(-1.0, 1.0, 5),
         actions=rng.normal(size=(n, 11)), last_actions=rng.normal(size=(n, 11)),
@@ -62,6 +65,9 @@ def random_worlds(rng, n):
     return f32(robot), f32(task)
 
 
+def random_direction(rng, n):
+    v = rng.normal(size=(n, 3))
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
 def observe(robot, task, noise_enabled, seed=5):
@@ -70,7 +76,8 @@ def observe(robot, task, noise_enabled, seed=5):
     policy, critic = (wp.zeros((n, size), dtype=float, device=DEVICE) for size in (NUM_POLICY_OBS, NUM_CRITIC_OBS))
     wp.launch(compute_observations, dim=n, device=DEVICE,
               inputs=[make_struct(RobotView, **robot), make_struct(PushTask, **task),
-                      wp.array(NOISE_SCALE, dtype=float, device=DEVICE), int(noise_enabled), seed, policy, critic])
+                      wp.array(NOISE_SCALE, dtype=float, device=DEVICE), int(noise_enabled), seed, SUCCESS_DISTANCE,
+                      wp.array([SUCCESS_ANGLE], dtype=float, device=DEVICE), policy, critic])
     return policy.numpy(), critic.numpy()
 
 
@@ -94,8 +101,16 @@ def raw_measurements(robot, task):
     )
 
 
+def object_at_goal_reference(x_o, goal_pos, goal_quat):
+    """The success rule (III-B): within the success distance, and the relative rotation's angle
+    (``2 acos |<q_o, q_g>|``) within the success angle."""
+    angle = 2.0 * np.arccos(np.clip(np.abs(np.sum(x_o[:, 3:] * goal_quat, axis=1)), 0.0, 1.0))
+    return (np.linalg.norm(goal_pos - x_o[:, :3], axis=1) <= SUCCESS_DISTANCE) & (angle <= SUCCESS_ANGLE)
+
+
 def privileged_reference(robot, task):
-    """Paper Table "Observations", o_t^pr: contact, CoM, mass, dims, inertia, object twist, shape one-hot."""
+    """Paper Table "Observations", o_t^pr: contact, CoM, mass, dims, inertia, object twist, shape one-hot; then ours,
+    whether the object is at its goal."""
     x_b, x_o = robot["body_q"][robot["base_body"]], robot["body_q"][robot["object_body"]]
     qd_o = robot["body_qd"][robot["object_body"]]
     q_b = x_b[:, 3:]
@@ -105,7 +120,7 @@ def privileged_reference(robot, task):
     return np.column_stack([
         task["contacts"][:, EE_CONTACT], quat_rotate_inv(q_b, com_w - x_b[:, :3]), task["object_mass"],
         task["object_dims"], task["object_inertia"], quat_rotate_inv(q_b, v_origin), quat_rotate_inv(q_b, qd_o[:, 3:]),
-        shape == 0, shape == 1,
+        shape == 0, shape == 1, object_at_goal_reference(x_o, task["goal_pos"], task["goal_quat"]),
     ])
 
 
@@ -119,7 +134,7 @@ def test_layout_is_the_papers_table():
     assert [size for _, size in POLICY_OBSERVATION_LAYOUT] == [3, 9, 5, 3, 3, 5, 3, 3, 9, 11]
     assert POLICY_TERMS is POLICY_OBSERVATION_LAYOUT
     assert POLICY_OBSERVATION_SIZE == NUM_POLICY_OBS == 54
-    assert NUM_POLICY_OBS + sum(size for _, size in PRIVILEGED_TERMS) == NUM_CRITIC_OBS == 73
+    assert NUM_POLICY_OBS + sum(size for _, size in PRIVILEGED_TERMS) == NUM_CRITIC_OBS == 74
 
 
 def test_runtime_imports_numpy_only():
@@ -146,6 +161,8 @@ def test_critic_privileged_terms(worlds):
     robot, task = worlds
     _, critic = observe(robot, task, noise_enabled=False)
     np.testing.assert_allclose(critic[:, 54:], privileged_reference(robot, task), atol=1e-5, rtol=1e-5)
+    at_goal = critic[:, -1]
+    assert 0.05 < at_goal.mean() < 0.45, "the random worlds hold both objects at their goals and objects beside them"
 
 
 def test_noise_bounded_zero_mean_and_actions_noise_free(worlds):

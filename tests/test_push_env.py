@@ -14,7 +14,7 @@ from dynpush.sim.push_env import PushEnv
 def test_vecenv_interface_and_zero_copy(small_env):
     env = small_env
     obs = env.reset()
-    assert obs["policy"].shape == (4, 54) and obs["critic"].shape == (4, 62)
+    assert obs["policy"].shape == (4, 54) and obs["critic"].shape == (4, 63)
     assert obs["policy"].dtype == torch.float32
     obs, reward, dones, extras = env.step(torch.zeros(4, 11))
     assert reward.shape == (4,) and dones.shape == (4,)
@@ -40,10 +40,31 @@ def test_the_critic_reads_no_sampled_action(small_env):
     actions = torch.linspace(-0.9, 0.9, 44).reshape(4, 11)  # distinct, within every clip
     obs, _, _, _ = env.step(actions)
     assert torch.equal(obs["policy"][:, 43:54], actions)
-    columns = [c for c in range(73) if c not in range(43, 54)]
+    columns = [c for c in range(74) if c not in range(43, 54)]
     assert torch.equal(obs["critic"], env.critic_obs_t[:, columns])
     for a in actions.flatten():
         assert not (obs["critic"] == a).any(), "a sampled action reached the critic's input"
+
+
+def test_the_critic_reads_whether_the_object_is_at_its_goal():
+    """The critic's last input applies the success rule to the state it observes: it equals the step's success flag
+    except where a world started a new episode. A run started before the critic read it keeps its 62 inputs."""
+    cfg = PushEnvConfig(num_envs=16, seed=2)
+    cfg.sampling.goal_radius, cfg.sampling.object_yaw, cfg.sampling.goal_yaw = (0.0, 0.1), (0.0, 0.0), (-0.6, 0.6)
+    env = PushEnv(cfg)
+    env.reset()
+    generator = torch.Generator().manual_seed(0)
+    seen = []
+    for _ in range(20):
+        obs, _, dones, _ = env.step(0.3 * torch.randn(16, 11, generator=generator))
+        at_goal = obs["critic"][:, -1]
+        assert ((at_goal == env.success_t.float()) | dones.bool()).all()
+        seen.append(at_goal)
+    assert 0.0 < torch.cat(seen).mean() < 1.0, "objects at their goals and beside them"
+    before = PushEnv(PushEnvConfig(num_envs=2, critic_reads_object_at_goal=False))
+    assert before.get_observations()["critic"].shape == (2, 62)
+    with pytest.raises(ConfigError, match="critic_reads_object_at_goal must be True or False"):
+        PushEnvConfig(critic_reads_object_at_goal=1).validate()
 
 
 def test_time_out_resets_and_reports(tmp_path):

@@ -296,6 +296,16 @@ def test_a_new_run_writes_nothing_before_its_init_from_checkpoint_is_read(tmp_pa
     assert not (tmp_path / "run").exists()
 
 
+def test_a_checkpoint_whose_critic_reads_other_inputs_is_refused_by_name(tmp_path):
+    """A run started before the critic read ``object_at_goal`` (62 inputs) does not seed a new run's critic (63): one
+    error naming the tensor and the settings that must match, and the new folder is not created."""
+    train(tiny(1, "env.critic_reads_object_at_goal=False"), tmp_path / "old")
+    with pytest.raises(CheckpointError, match=r"critic obs_normalizer._mean has shape \(1, 62\), this run's \(1, 63\).*"
+                                              r"env.critic_reads_object_at_goal"):
+        train(tiny(1), tmp_path / "new", init_from=tmp_path / "old" / "model_0.pt")
+    assert not (tmp_path / "new").exists()
+
+
 @pytest.mark.parametrize("field, value", [
     ("learning_rate", -1.0), ("learning_rate", 0.0), ("learning_rate", 2.0), ("gamma", 0.0), ("gamma", 1.5),
     ("lam", -0.1), ("clip_param", 0.0), ("num_learning_epochs", 0), ("num_mini_batches", 0), ("entropy_coef", -0.01),

@@ -3,13 +3,13 @@
 ``r1 = exp(-||K_g - K_o|| / sigma_3^2)`` (2 on success), ``r2 = exp(-||p_e - p_r|| / sigma_1^2)`` (held
 at its previous value on success), ``r3 = exp(v_o_hat . p_og_hat / sigma_2^2 - 1)`` (0 on success),
 ``r4 = exp(-||du_t - du_{t-1}|| / sigma_4b^2) + exp(-||dq_t - dq_{t-1}|| / sigma_4a^2)``.
-Total ``sum_i w_i r_i``. Success: ``||p_o - p_g|| <= d_success`` and the rotation between object and
-goal ``<= theta_success``.
+Total ``sum_i w_i r_i``. Success: the rule of :mod:`.goal` (``||p_o - p_g|| <= d_success`` and the rotation
+between object and goal ``<= theta_success``).
 """
 
 import warp as wp
 
-from ..frames import rotation_angle
+from .goal import object_at_goal
 from .keypoints import keypoint_distance
 from .observations import object_origin_velocity
 from .views import NUM_ARM_JOINTS, NUM_BASE_COMMANDS, PushTask, RobotView
@@ -60,7 +60,7 @@ def compute_rewards(
     p_g = task.goal_pos[w]
     q_g = task.goal_quat[w]
 
-    is_success = wp.length(p_g - p_o) <= params.success_distance and rotation_angle(q_o, q_g) <= success_angle[0]
+    is_success = object_at_goal(p_o, q_o, p_g, q_g, params.success_distance, success_angle[0])
 
     r1 = wp.exp(-keypoint_distance(p_o, q_o, p_g, q_g, task.object_dims[w]) / (params.sigma_task * params.sigma_task))
     p_e = wp.transform_point(robot.body_q[robot.ee_body[w]], robot.ee_offset)

@@ -14,7 +14,7 @@ from dynpush.runtime.actions import NUM_BASE_COMMANDS  # noqa: F401
 from dynpush.runtime.observation import NUM_ACTIONS, NUM_ARM_JOINTS  # noqa: F401
 from dynpush.runtime.observation import POLICY_OBSERVATION_SIZE as NUM_POLICY_OBS  # noqa: F401
 
-NUM_CRITIC_OBS = 73
+NUM_CRITIC_OBS = 74
 NUM_COLLISIONS = 18
 CONTACT_COLUMNS = NUM_COLLISIONS + 1  # the undesired collisions, then the EE-object contact state
 EE_CONTACT = NUM_COLLISIONS

@@ -21,6 +21,7 @@ percentage points, 2 on a bad input (one line).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import tempfile
@@ -90,14 +91,15 @@ def main() -> int:
         summary = evaluate(policy, eval_cfg, out)
         return {"success": summary["success_rate"], "toppled": summary["toppled_rate"]}
 
-    start = rates(init_from, run_dir / "eval_start")
-    train(cfg, run_dir, command=" ".join(sys.argv), init_from=init_from)
     steps_per_iteration = cfg.env.num_envs * cfg.num_steps_per_env
     checkpoints = []
-    for k in args.checkpoints:
-        policy = export_policy(run_dir, checkpoint=f"model_{k}.pt", out=run_dir / f"eval_{k}" / "policy.onnx")
-        checkpoints.append({"iteration": k, "actor_updates": max(0, k + 1 - cfg.fine_tune.critic_warmup_iterations),
-                            "world_steps": (k + 1) * steps_per_iteration, **rates(policy, run_dir / f"eval_{k}")})
+    with contextlib.redirect_stdout(sys.stderr):  # rsl_rl and the evaluations print; stdout carries the JSON only
+        start = rates(init_from, run_dir / "eval_start")
+        train(cfg, run_dir, command=" ".join(sys.argv), init_from=init_from)
+        for k in args.checkpoints:
+            policy = export_policy(run_dir, checkpoint=f"model_{k}.pt", out=run_dir / f"eval_{k}" / "policy.onnx")
+            checkpoints.append({"iteration": k, "actor_updates": max(0, k + 1 - cfg.fine_tune.critic_warmup_iterations),
+                                "world_steps": (k + 1) * steps_per_iteration, **rates(policy, run_dir / f"eval_{k}")})
     worst = min(c["success"] for c in checkpoints)
     print(json.dumps({"run_dir": str(run_dir), "overrides": overrides, "start": start, "checkpoints": checkpoints,
                       "kept_start": worst >= start["success"] - args.tolerance}, indent=2))

@@ -19,6 +19,7 @@ reaches ``--threshold``, and the deterministic success of the final actor on ``-
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import sys
@@ -71,7 +72,8 @@ def main() -> int:
     cfg = apply_overrides(TrainConfig.preset_config("cpu"), overrides)
     run_dir = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="ppo_sanity_")) / "run"
     start = time.perf_counter()
-    train(cfg, run_dir, command=" ".join(sys.argv))
+    with contextlib.redirect_stdout(sys.stderr):  # rsl_rl prints; stdout carries the JSON only
+        train(cfg, run_dir, command=" ".join(sys.argv))
     minutes = (time.perf_counter() - start) / 60.0
 
     records = [json.loads(line) for line in (run_dir / "progress.jsonl").read_text().splitlines()]
@@ -80,7 +82,8 @@ def main() -> int:
     steps_per_iteration = cfg.env.num_envs * cfg.num_steps_per_env
     crossing = first_crossing(success, args.window, args.threshold)
     policy = export_policy(run_dir)  # its metadata carries the sanity task, which the evaluation rebuilds
-    summary = evaluate(policy, EvalConfig(episodes=args.eval_episodes, seed=0), run_dir / "eval")
+    with contextlib.redirect_stdout(sys.stderr):
+        summary = evaluate(policy, EvalConfig(episodes=args.eval_episodes, seed=0), run_dir / "eval")
     result = {
         "task": SANITY_TASK,
         "num_envs": cfg.env.num_envs,

@@ -356,7 +356,8 @@ class PushEnvConfig:
     def validate(self) -> PushEnvConfig:
         validate_env(self)
         if not isinstance(self.critic_reads_object_at_goal, bool):
-            raise ConfigError(f"critic_reads_object_at_goal must be True or False, got {self.critic_reads_object_at_goal!r}")
+            raise ConfigError(
+                f"critic_reads_object_at_goal must be True or False, got {self.critic_reads_object_at_goal!r}")
         # Older runs' configs carry the locomotion task's buffers in the legged section, unused while it is off.
         if self.legged.enabled and self.legged.mujoco.nconmax < self.sim.contacts_per_world:
             raise ConfigError(f"legged.mujoco.nconmax ({self.legged.mujoco.nconmax}) must be >= sim.contacts_per_world "

@@ -196,8 +196,8 @@ class PushEnv(EnvBase, VecEnv):
         # Zero-copy torch views.
         t = wp.to_torch
         self.command_base_t, self.command_arm_t = t(self.command_base), t(self.command_arm)
-        self.critic_input_columns = torch.tensor(observations_k.critic_input_columns(self.cfg.critic_reads_object_at_goal),
-                                                 device=self.critic_obs_t.device)
+        columns = observations_k.critic_input_columns(self.cfg.critic_reads_object_at_goal)
+        self.critic_input_columns = torch.tensor(columns, device=self.critic_obs_t.device)
         self.episode_success_t = t(self.episode_success)
         self.episode_toppled_t = t(self.episode_toppled)
         self.episode_diverged_t = t(self.episode_diverged)

@@ -243,6 +243,7 @@ class EnvBase:
 
     def state_mismatch(self, state: dict[str, np.ndarray]) -> str | None:
         """Why ``load_state_dict`` cannot restore ``state`` here (missing arrays, other shapes), or None."""
+        state = self._upgraded_state(state)
         arrays = self._state_arrays()
         missing = set(arrays) - set(state)
         if missing:
@@ -258,12 +259,17 @@ class EnvBase:
         mismatch = self.state_mismatch(state)
         if mismatch is not None:
             raise ValueError(mismatch)
+        state = self._upgraded_state(state)
         arrays = self._state_arrays()
         with wp.ScopedDevice(self.wp_device):
             self._before_state_load(arrays, state)
             for name, array in arrays.items():
                 array.assign(state[name])
             self._after_state_load()
+
+    def _upgraded_state(self, state: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """``state`` as this version saves it, from a checkpoint an older version wrote (unchanged by default)."""
+        return state
 
     def _before_state_load(self, arrays: dict[str, wp.array], state: dict[str, np.ndarray]) -> None:
         """What has to happen before the saved ``state`` is written into ``arrays`` (nothing by default)."""

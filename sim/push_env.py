@@ -536,7 +536,7 @@ class PushEnv(EnvBase, VecEnv):
     def _observe(self) -> None:
         self._launch(observations_k.compute_observations, [self.views[0], self.task, self.noise_scale,
                                                            int(self.cfg.noise.enabled), self.cfg.seed,
-                                                           float(self.cfg.rewards.success_distance), self.success_angle,
+                                                           self.reward_params.success_distance, self.success_angle,
                                                            self.policy_obs, self.critic_obs])
 
     # ------------------------------------------------------------------ checkpointing
@@ -550,6 +550,15 @@ class PushEnv(EnvBase, VecEnv):
         arrays["policy_obs"] = self.policy_obs
         arrays["critic_obs"] = self.critic_obs
         return arrays
+
+    def _upgraded_state(self, state: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """A state saved before the critic buffer held ``object_at_goal`` (one column fewer) gains that column as
+        zeros: the runs that saved it have critics that do not read it (``env.critic_reads_object_at_goal`` reads
+        False from their configs), and the next step writes it, so they continue exactly."""
+        critic = state.get("critic_obs")
+        if critic is None or critic.ndim != 2 or critic.shape[1] != NUM_CRITIC_OBS - 1:
+            return state
+        return {**state, "critic_obs": np.concatenate([critic, np.zeros((critic.shape[0], 1), critic.dtype)], axis=1)}
 
     def _before_state_load(self, arrays: dict[str, wp.array], state: dict[str, np.ndarray]) -> None:
         """Re-applies every world's saved episode (object variants, geometry and mass properties) before the saved state."""

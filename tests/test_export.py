@@ -139,6 +139,20 @@ def test_the_committed_long_runs_load_and_export_from_their_checkpoints(run, tmp
     np.testing.assert_allclose(OnnxPolicy(out, batched=True)(obs), torch_actions(actor, obs), atol=1e-5)
 
 
+@pytest.mark.parametrize("run", CAMPAIGNS, ids=[run.name for run in CAMPAIGNS])
+def test_the_committed_long_runs_resume_their_episodes(run):
+    """The environment state in a committed run's latest checkpoint (the first process's) fits today's environment
+    of the run's config: ``--resume`` continues its episodes instead of starting fresh ones."""
+    from dynpush.policies.checkpoint_file import read_checkpoint
+    from dynpush.sim.envs import make_push_env
+
+    checkpoint = max(run.glob("model_*.pt"), key=lambda path: int(path.stem.split("_")[1]))
+    state = read_checkpoint(checkpoint)["infos"]["env_state"]
+    cfg = TrainConfig.from_dict(json.loads((run / "config.json").read_text()))
+    cfg.env.num_envs = len(state["task.goal_pos"])
+    assert make_push_env(cfg.env).state_mismatch(state) is None
+
+
 def test_the_same_file_runs_in_warp_nn(exported):
     """warp-nn is the ONNX runtime of Newton's examples (``pip install newton[onnx]``)."""
     pytest.importorskip("warp_nn")

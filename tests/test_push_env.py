@@ -67,6 +67,28 @@ def test_the_critic_reads_whether_the_object_is_at_its_goal():
         PushEnvConfig(critic_reads_object_at_goal=1).validate()
 
 
+def test_a_state_saved_before_object_at_goal_continues_exactly(small_env):
+    """An environment state that an older version saved (the critic buffer one column short, without
+    ``object_at_goal``) loads: the saved columns as they were, the new one 0, and the steps that follow are those of
+    the full state."""
+    env = small_env
+    env.reset()
+    env.step(torch.zeros(4, 11))
+    state = env.state_dict()
+    older = dict(state, critic_obs=state["critic_obs"][:, :-1])
+    assert env.state_mismatch(older) is None
+    actions = 0.5 * torch.randn(4, 11, generator=torch.Generator().manual_seed(3))
+    env.load_state_dict(older)
+    np.testing.assert_array_equal(env.critic_obs.numpy()[:, :-1], state["critic_obs"][:, :-1])
+    assert (env.critic_obs.numpy()[:, -1] == 0.0).all()
+    obs_older, reward_older, dones_older, _ = env.step(actions)
+    env.load_state_dict(state)
+    obs_full, reward_full, dones_full, _ = env.step(actions)
+    assert torch.equal(obs_older["policy"], obs_full["policy"]) and torch.equal(obs_older["critic"], obs_full["critic"])
+    assert torch.equal(reward_older, reward_full) and torch.equal(dones_older, dones_full)
+    assert "critic_obs" in env.state_mismatch(dict(state, critic_obs=state["critic_obs"][:, :-2]))
+
+
 def test_time_out_resets_and_reports(tmp_path):
     env = PushEnv(PushEnvConfig(num_envs=2, episode_length_s=0.2, seed=3))
     env.set_episodes({0: EpisodeSpec(base=(-2.0, 0.0, 0.0)), 1: EpisodeSpec(base=(-2.0, 0.0, 0.0))})

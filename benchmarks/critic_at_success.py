@@ -8,7 +8,10 @@ is credited less than it earned, one that takes it out more. This script measure
 rollouts, with its actor (sampled actions, as in training), its critic and the training code's CaT and GAE:
 
 - the critic's error against the discounted returns (CaT's ``1 - delta`` included) of long rollouts, by region:
-  inside success, just outside (within ``--margin`` times the success distance and angle), and the rest;
+  inside success (the environment's success flag), just outside (within ``--margin`` times the success distance and
+  angle), and the rest. A state counts if its return sums ``--horizon`` steps (default: until ``gamma`` to that power
+  is below 2 %) and its episode does not time out within them: at a time-out rsl_rl adds the critic's own value to the
+  reward, which would enter the return it is compared with;
 - the mean advantage (GAE at ``lam`` 0.95 and at 1, the run's ``gamma``, one rollout of ``num_steps_per_env`` at a
   time as PPO computes it, before normalisation) of the transitions that enter success, leave it, stay in it and stay
   out, in reward-per-step units as the critic learns them.
@@ -17,7 +20,7 @@ Prints one JSON object. The world count, rollouts and seed are arguments; the re
 curricula at their saved levels, ``p_max`` at the checkpoint's iteration).
 
     python benchmarks/critic_at_success.py campaigns/long2 [--checkpoint model_K.pt] [--num-envs 256]
-        [--rollouts 40] [--margin 2.0] [--seed 3] [--set FIELD=VALUE ...]
+        [--rollouts 40] [--margin 2.0] [--horizon STEPS] [--seed 3] [--set FIELD=VALUE ...]
 """
 
 from __future__ import annotations
@@ -73,6 +76,18 @@ def transition_groups(before: torch.Tensor, after: torch.Tensor, valid: torch.Te
     }
 
 
+def scored_states(time_outs: torch.Tensor, horizon: int) -> torch.Tensor:
+    """Mask ``[T, N]`` of the states whose return sums ``horizon`` steps of the collected ones and meets no time-out
+    within them (steps ``t .. t + horizon - 1``)."""
+    steps = time_outs.shape[0]
+    scored = torch.zeros_like(time_outs, dtype=torch.bool)
+    if steps <= horizon:
+        return scored
+    count = torch.cat([torch.zeros_like(time_outs[:1], dtype=torch.long), time_outs.long().cumsum(0)])
+    scored[: steps - horizon] = (count[horizon:steps] - count[: steps - horizon]) == 0
+    return scored
+
+
 def masked_mean(values: torch.Tensor, mask: torch.Tensor) -> float | None:
     return float(values[mask].mean()) if bool(mask.any()) else None
 
@@ -82,12 +97,13 @@ def collect(env, alg, rollouts: int, steps: int, critic_terms: tuple[tuple[str, 
     without updates. Returns ``[rollouts * steps, num_envs]`` tensors: the stored reward (reward-per-step units,
     CaT's ``1 - delta`` and the time-out bootstrap included), the probability the episode goes on, the critic's value,
     the success flag before and after each step (``valid`` False where the state before was a new episode's first,
-    whose flag is not read), the success margins of the state before, and the advantages at each of ``LAMBDAS``."""
+    whose flag is not read), the success margins of the state before, whether the step timed out, and the advantages
+    at each of ``LAMBDAS``."""
     storage = alg.storage
     rows = collections.defaultdict(list)
     obs = env.get_observations()
     success_before = env.success_t.clone()
-    valid_before = torch.zeros(env.num_envs, dtype=torch.bool)
+    valid_before = torch.zeros(env.num_envs, dtype=torch.bool, device=env.device)
     with torch.inference_mode():
         for _ in range(rollouts):
             for _ in range(steps):
@@ -97,7 +113,8 @@ def collect(env, alg, rollouts: int, steps: int, critic_terms: tuple[tuple[str, 
                 alg.process_env_step(obs, rewards, dones, extras)
                 success_after = env.success_t.clone()
                 for name, row in (("distance", distance), ("angle", angle), ("success_before", success_before),
-                                  ("success_after", success_after), ("valid", valid_before)):
+                                  ("success_after", success_after), ("valid", valid_before),
+                                  ("time_out", extras["time_outs"].to(env.device))):
                     rows[name].append(row.unsqueeze(0))
                 done = dones.bool()
                 success_before, valid_before = success_after.masked_fill(done, 0), ~done
@@ -120,7 +137,8 @@ def main() -> int:
     parser.add_argument("--rollouts", type=int, default=40, help="rollouts of num_steps_per_env steps, no update")
     parser.add_argument("--margin", type=float, default=2.0, help="'just outside': within this many times the "
                                                                    "success distance and angle")
-    parser.add_argument("--horizon", type=int, default=400, help="steps after a state that its return sums")
+    parser.add_argument("--horizon", type=int, default=None,
+                        help="steps after a state that its return sums (default: until gamma**steps < 0.02)")
     parser.add_argument("--seed", type=int, default=3)
     parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE", help="overrides of the run's config")
     args = parser.parse_args()
@@ -138,34 +156,36 @@ def main() -> int:
         checkpoint = args.run / args.checkpoint if args.checkpoint else latest_checkpoint(args.run)
         if checkpoint is None or not checkpoint.is_file():
             raise UserError(f"{args.run}: no checkpoint {args.checkpoint or 'model_K.pt'}")
-        if args.rollouts * cfg.num_steps_per_env <= args.horizon:
+        horizon = args.horizon or math.ceil(math.log(0.02) / math.log(cfg.ppo.gamma))
+        if args.rollouts * cfg.num_steps_per_env <= horizon:
             raise UserError(f"--rollouts x num_steps_per_env ({args.rollouts * cfg.num_steps_per_env}) must exceed"
-                            f" --horizon {args.horizon}")
+                            f" the horizon of {horizon} steps")
+        torch.set_num_threads(1)
+        torch.manual_seed(args.seed)
+        with contextlib.redirect_stdout(sys.stderr):  # rsl_rl prints the models; stdout carries the JSON only
+            env = cfg.make_env(cfg.env)
+            runner = CaTOnPolicyRunner(env, cfg.runner_cfg(), log_dir=None, device=env.device)
+            runner.load(str(checkpoint))  # one process: fresh episodes at the saved curricula levels
     except UserError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
 
-    torch.set_num_threads(1)
-    torch.manual_seed(args.seed)
-    with contextlib.redirect_stdout(sys.stderr):  # rsl_rl prints the models; stdout carries the JSON only
-        env = cfg.make_env(cfg.env)
-        runner = CaTOnPolicyRunner(env, cfg.runner_cfg(), log_dir=None, device=env.device)
-        runner.load(str(checkpoint))  # one process: fresh episodes at the saved curricula levels
     iteration = runner.current_learning_iteration
     runner.apply_curricula(iteration, fresh_run=False)
     runner.apply_schedules(iteration, cfg.iterations)
+    if runner.near_goal_starts.share > 0:  # as CaTOnPolicyRunner.learn sets up the training episodes
+        runner.apply_near_goal_starts()
+    if runner.behind_starts.share > 0:
+        runner.apply_behind_starts()
     distance_limit = cfg.env.rewards.success_distance
     angle_limit = float(env.success_angle.numpy()[0])  # [rad] where the goal curriculum left it
     data = collect(env, runner.alg, args.rollouts, cfg.num_steps_per_env,
                    critic_input_terms(cfg.env.critic_reads_object_at_goal))
 
-    # The time-out bootstrap rsl_rl adds to a timed-out step's reward is the critic's own estimate, so the return of
-    # a step before a time-out is partly the critic's; next to --horizon time-outs are rare, and they are kept.
     returns = discounted_returns(data["reward"], data["continues"], runner.alg.gamma)
     value = data["value"]
-    usable = torch.zeros_like(returns, dtype=torch.bool)
-    usable[: returns.shape[0] - args.horizon] = True  # states whose return sums at least --horizon steps
-    inside = (data["distance"] <= distance_limit) & (data["angle"] <= angle_limit)
+    usable = scored_states(data["time_out"], horizon) & data["valid"]  # valid: the state's success flag is known
+    inside = data["success_before"].bool()
     near = ~inside & (data["distance"] <= args.margin * distance_limit) & (data["angle"] <= args.margin * angle_limit)
     regions = {"inside": inside, "just_outside": near, "rest": ~inside & ~near}
     critic = {name: {"states": int((mask & usable).sum()), "mean_value": masked_mean(value, mask & usable),
@@ -181,7 +201,7 @@ def main() -> int:
     print(json.dumps({
         "run": str(args.run), "checkpoint": checkpoint.name, "iteration": iteration, "num_envs": env.num_envs,
         "steps": int(returns.shape[0]), "gamma": runner.alg.gamma, "success_distance_m": distance_limit,
-        "success_angle_deg": math.degrees(angle_limit), "margin": args.margin, "horizon": args.horizon,
+        "success_angle_deg": math.degrees(angle_limit), "margin": args.margin, "horizon": horizon,
         "overrides": args.set,
         "critic_error_by_region": critic,
         "advantage_by_transition": advantages, "advantage_std": spread,

@@ -84,7 +84,7 @@ def check_shapes(path: str, model: str, expected: dict[str, torch.Tensor], saved
             raise CheckpointError(
                 f"checkpoint {path}: {model} {name} has shape {tuple(saved[name].shape)}, this run's "
                 f"{tuple(tensor.shape)}: the networks' sizes and inputs must match (network.actor_hidden, "
-                f"network.critic_hidden, env.critic_reads_object_at_goal)")
+                f"network.critic_hidden; a push run's env.critic_reads_object_at_goal)")
 
 
 class CaTOnPolicyRunner(OnPolicyRunner):

@@ -62,3 +62,15 @@ def test_transition_groups_partition_the_valid_transitions(load_benchmark):
     assert groups["stay_in"].tolist() == [False, False, False, True, False, False]
     union = sum(mask.int() for mask in groups.values())
     assert union.tolist() == valid.int().tolist()
+
+
+def test_scored_states_sum_the_horizon_and_meet_no_time_out(load_benchmark):
+    """A state is scored when ``horizon`` collected steps follow it and none of steps t .. t + horizon - 1 times out
+    (its return would hold the critic's own bootstrap)."""
+    bench = load_benchmark("critic_at_success")
+    time_outs = torch.zeros(8, 2, dtype=torch.bool)
+    time_outs[4, 1] = True  # world 1 times out at step 4
+    scored = bench.scored_states(time_outs, horizon=3)
+    assert scored[:, 0].tolist() == [True] * 5 + [False] * 3  # the last 3 steps lack a full horizon
+    assert scored[:, 1].tolist() == [True, True, False, False, False, False, False, False]
+    assert not bench.scored_states(time_outs, horizon=8).any()

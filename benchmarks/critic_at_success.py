@@ -33,24 +33,11 @@ import math
 import sys
 from pathlib import Path
 
+import numpy as np
 import torch
 
 LAMBDAS = (0.95, 1.0)
 """GAE's lambda: rsl_rl's default, and advantages without the critic's part (its value only as a baseline)."""
-
-
-def success_margins(critic_obs: torch.Tensor, terms: tuple[tuple[str, int], ...]) -> tuple[torch.Tensor, torch.Tensor]:
-    """Object-to-goal distance [m] and rotation angle [rad] of each row of the critic's (noiseless) observation,
-    from ``object_to_goal_b`` and ``goal_rotation_o`` (row-major rotation matrix); ``terms`` is the critic's layout."""
-    columns, start = {}, 0
-    for name, size in terms:
-        columns[name] = slice(start, start + size)
-        start += size
-    distance = critic_obs[:, columns["object_to_goal_b"]].norm(dim=1)
-    rotation = critic_obs[:, columns["goal_rotation_o"]]
-    trace = rotation[:, 0] + rotation[:, 4] + rotation[:, 8]
-    angle = torch.acos(((trace - 1.0) / 2.0).clamp(-1.0, 1.0))
-    return distance, angle
 
 
 def discounted_returns(rewards: torch.Tensor, continues: torch.Tensor, gamma: float) -> torch.Tensor:
@@ -92,14 +79,17 @@ def masked_mean(values: torch.Tensor, mask: torch.Tensor) -> float | None:
     return float(values[mask].mean()) if bool(mask.any()) else None
 
 
-def collect(env, alg, rollouts: int, steps: int, critic_terms: tuple[tuple[str, int], ...]) -> dict[str, torch.Tensor]:
+def collect(env, alg, rollouts: int, steps: int) -> dict[str, torch.Tensor]:
     """Runs ``rollouts`` rollouts of ``steps`` steps as PPO collects them (sampled actions, CaT, rsl_rl's storage),
     without updates. Returns ``[rollouts * steps, num_envs]`` tensors: the stored reward (reward-per-step units,
     CaT's ``1 - delta`` and the time-out bootstrap included), the probability the episode goes on, the critic's value,
     the success flag before and after each step (``valid`` False where the state before was a new episode's first,
-    whose flag is not read), the success margins of the state before, whether the step timed out, and the advantages
-    at each of ``LAMBDAS``."""
-    storage = alg.storage
+    whose flag is not read), the object's distance [m] and rotation angle [rad] to its goal in the state before, whether
+    the step timed out, and the advantages at each of ``LAMBDAS``."""
+    from dynpush.policies.env_probe import EnvProbe
+    from dynpush.runtime.frames import rotation_angle
+
+    storage, probe = alg.storage, EnvProbe(env)
     rows = collections.defaultdict(list)
     obs = env.get_observations()
     success_before = env.success_t.clone()
@@ -107,12 +97,15 @@ def collect(env, alg, rollouts: int, steps: int, critic_terms: tuple[tuple[str, 
     with torch.inference_mode():
         for _ in range(rollouts):
             for _ in range(steps):
-                distance, angle = success_margins(obs["critic"], critic_terms)
+                obj = probe.object()
+                distance = torch.as_tensor(np.linalg.norm(env.task.goal_pos.numpy() - obj[:, :3], axis=1))
+                angle = torch.as_tensor(rotation_angle(obj[:, 3:], env.task.goal_quat.numpy()))
                 actions = alg.act(obs)
                 obs, rewards, dones, extras = env.step(actions)
                 alg.process_env_step(obs, rewards, dones, extras)
                 success_after = env.success_t.clone()
-                for name, row in (("distance", distance), ("angle", angle), ("success_before", success_before),
+                for name, row in (("distance", distance.to(env.device)), ("angle", angle.to(env.device)),
+                                  ("success_before", success_before),
                                   ("success_after", success_after), ("valid", valid_before),
                                   ("time_out", extras["time_outs"].to(env.device))):
                     rows[name].append(row.unsqueeze(0))
@@ -144,7 +137,6 @@ def main() -> int:
     args = parser.parse_args()
 
     from dynpush.errors import UserError
-    from dynpush.kernels.push.observations import critic_input_terms
     from dynpush.policies.run_folder import latest_checkpoint, read_run_config
     from dynpush.policies.overrides import apply_overrides
     from dynpush.policies.runner import CaTOnPolicyRunner
@@ -179,8 +171,7 @@ def main() -> int:
         runner.apply_behind_starts()
     distance_limit = cfg.env.rewards.success_distance
     angle_limit = float(env.success_angle.numpy()[0])  # [rad] where the goal curriculum left it
-    data = collect(env, runner.alg, args.rollouts, cfg.num_steps_per_env,
-                   critic_input_terms(cfg.env.critic_reads_object_at_goal))
+    data = collect(env, runner.alg, args.rollouts, cfg.num_steps_per_env)
 
     returns = discounted_returns(data["reward"], data["continues"], runner.alg.gamma)
     value = data["value"]

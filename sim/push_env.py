@@ -348,9 +348,9 @@ class PushEnv(EnvBase, VecEnv):
         are sent to the robot as the mapped ones are, clamped to the command limits (kernel ``apply_commands``). The
         action terms (the policy observation's ``last_actions``, the action-rate reward and the arm-rate constraint)
         are about the policy's output, which commands do not carry: ``actions`` (num_envs, 11), the raw policy output
-        behind the commands if the caller has it, are recorded as :meth:`step` records its own (so that ``step_commands(*action_mapping.commands(a), a)`` is
-        ``step(a)``); without them the history records zeros, a policy at rest, and those terms do not describe the
-        commands. Commands must be finite.
+        behind the commands if the caller has it, are recorded as :meth:`step` records its own (so that
+        ``step_commands(*action_mapping.commands(a), a)`` is ``step(a)``); without them the history records zeros, a
+        policy at rest, and those terms do not describe the commands. Commands must be finite.
         """
         base_command, arm_targets = (torch.as_tensor(c, dtype=torch.float32) for c in (base_command, arm_targets))
         if base_command.shape != self.command_base_t.shape or arm_targets.shape != self.command_arm_t.shape:

@@ -1,35 +1,9 @@
-"""`benchmarks/critic_at_success.py`: the success margins it reads from the critic's observation, its discounted
-returns and its transition groups, against hand-made inputs (no simulation)."""
-
-import math
+"""`benchmarks/critic_at_success.py`: its discounted returns, transition groups and scored states, against hand-made
+inputs (no simulation)."""
 
 import numpy as np
 import pytest
 import torch
-
-
-def axis_angle_matrix(axis, angle):
-    """Rodrigues' rotation matrix (numpy), independent of the code under test."""
-    x, y, z = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * k @ k
-
-
-def test_success_margins_read_distance_and_rotation_angle(load_benchmark):
-    """Distance is the norm of ``object_to_goal_b``, the angle that of the rotation ``goal_rotation_o`` (row-major),
-    found by name in the layout whatever comes before them."""
-    bench = load_benchmark("critic_at_success")
-    terms = (("before", 2), ("object_to_goal_b", 3), ("goal_rotation_o", 9), ("after", 1))
-    rng = np.random.default_rng(0)
-    rows, expected = [], []
-    for angle in (0.0, 0.1, 0.5, 2.0, math.pi - 1e-3):
-        offset = rng.normal(size=3) * 0.2
-        rotation = axis_angle_matrix(rng.normal(size=3), angle)
-        rows.append(np.concatenate([rng.normal(size=2), offset, rotation.reshape(-1), rng.normal(size=1)]))
-        expected.append((np.linalg.norm(offset), angle))
-    distance, angle = bench.success_margins(torch.tensor(np.array(rows), dtype=torch.float64), terms)
-    np.testing.assert_allclose(distance.numpy(), [d for d, _ in expected], atol=1e-9)
-    np.testing.assert_allclose(angle.numpy(), [a for _, a in expected], atol=2e-4)
 
 
 def test_discounted_returns(load_benchmark):

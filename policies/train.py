@@ -33,6 +33,17 @@ from .training import (  # noqa: F401  (re-exported: the CLI, tests and benchmar
 )
 
 
+def with_default(data: dict, path: list[str], value: object) -> dict:
+    """``data`` with ``value`` at ``path`` where the field's section is present and the field is missing (copies only
+    the dicts on the way)."""
+    head, rest = path[0], path[1:]
+    if not rest:
+        return data if head in data else {**data, head: value}
+    if not isinstance(data.get(head), dict):
+        return data
+    return {**data, head: with_default(data[head], rest, value)}
+
+
 @dataclass
 class TrainConfig:
     preset: str = "cpu"
@@ -85,6 +96,9 @@ class TrainConfig:
 
     # Not a field: the flat names of fields that moved into a section; apply_overrides names the new path.
     MOVED_FIELDS = MOVED_FIELDS
+    # Not a field: fields added since the first runs, with the value that reproduces what a run written before them
+    # trained with (``from_dict`` gives it to a config that lacks the field).
+    ADDED_FIELDS = {"env.critic_reads_object_at_goal": False, "env.constraints.contacts_at_step_end": False}
 
     @staticmethod
     def preset_config(name: str) -> TrainConfig:
@@ -156,12 +170,11 @@ class TrainConfig:
     def from_dict(data: dict) -> TrainConfig:
         """The config of a ``config.json`` (or an exported policy's ``training_config``). Runs written before the
         ``fine_tune`` section existed hold its fields at the top level (``MOVED_FIELDS``): they are read into it, with
-        the same values; runs written before the critic read ``object_at_goal`` lack
-        ``env.critic_reads_object_at_goal``: it reads as False, their critic's input. The caller's dict is left
-        unchanged."""
+        the same values; a field added since the run was written (``ADDED_FIELDS``) reads as the value the run trained
+        with, wherever its section is present. The caller's dict is left unchanged."""
         data = dict(data)
-        if isinstance(data.get("env"), dict) and "critic_reads_object_at_goal" not in data["env"]:
-            data["env"] = {**data["env"], "critic_reads_object_at_goal": False}
+        for path, value in TrainConfig.ADDED_FIELDS.items():
+            data = with_default(data, path.split("."), value)
         moved = {name: data.pop(name) for name in MOVED_FIELDS if name in data}
         if moved:
             section = dict(data.get("fine_tune", {}))

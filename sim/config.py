@@ -224,6 +224,11 @@ class ConstraintConfig:
     # c_theta is active while ||v_b|| > this [m/s]; the paper writes "> 0".
     base_moving_speed: float = 0.0
     contact_distance: float = 0.005  # m: a contact pair closer than this counts as touching (ours)
+    # Ours: contacts are those of the state a control step ends in, the state its action leaves. Counted over the
+    # step's substeps instead, a lasting contact violates from the first substep, which starts from the previous
+    # step's state: every action inside the contact is then terminated alike (CaT), the one that ends it included,
+    # and no action is credited with leaving it. Configs of runs started before it read as False (TrainConfig.from_dict).
+    contacts_at_step_end: bool = True
 
     def validate(self, prefix: str = "constraints") -> None:
         for name in ("base_command_lower", "base_command_upper"):
@@ -239,6 +244,8 @@ class ConstraintConfig:
         check_positive(f"{prefix}.object_tilt_limit_deg", self.object_tilt_limit_deg)
         check_positive(f"{prefix}.base_moving_speed", self.base_moving_speed, allow_zero=True)
         check_positive(f"{prefix}.contact_distance", self.contact_distance, allow_zero=True)
+        if not isinstance(self.contacts_at_step_end, bool):
+            raise ConfigError(f"{prefix}.contacts_at_step_end must be True or False, got {self.contacts_at_step_end!r}")
 
 
 @dataclass

@@ -383,10 +383,11 @@ class PushEnv(EnvBase, VecEnv):
         wp.capture_launch(self._graph_commands)
 
     def _physics_substeps(self) -> None:
-        model, cfg = self.scene.model, self.cfg
+        cfg = self.cfg
         dt = cfg.control_dt / cfg.sim.substeps
         states = [self.state_0, self.state_1]
         c = self.contacts
+        at_step_end = cfg.constraints.contacts_at_step_end
         for sub in range(cfg.sim.substeps):
             state_in, state_out = states[sub % 2], states[(sub + 1) % 2]
             view = self.views[sub % 2]
@@ -394,17 +395,27 @@ class PushEnv(EnvBase, VecEnv):
                 self._drive_base(view, state_in)
             with self._stage("collision"):
                 self.collision.collide(state_in, c)
-                wp.launch(
-                contacts_k.classify_contacts,
-                dim=c.rigid_contact_max,
-                    inputs=[c.rigid_contact_count, c.rigid_contact_shape0, c.rigid_contact_shape1, c.rigid_contact_point0,
-                            c.rigid_contact_point1, c.rigid_contact_normal, c.rigid_contact_margin0, c.rigid_contact_margin1,
-                            model.shape_body, model.shape_world, self.shape_role, self.shape_self_column, state_in.body_q,
-                            cfg.constraints.contact_distance, self.task],
-                    device=self.wp_device,
-                )
+                if not at_step_end:
+                    self._classify_contacts(state_in)
             with self._stage("physics"):
                 self.solver.step(state_in, state_out, self.control, c, dt)
+            if at_step_end and sub == cfg.sim.substeps - 1:
+                with self._stage("collision"):
+                    # The last substep's pairs, their gaps measured in the state the step ends in.
+                    self._classify_contacts(state_out)
+
+    def _classify_contacts(self, state: newton.State) -> None:
+        """Marks the contact columns of ``self.task`` for the pairs in ``self.contacts`` touching in ``state``."""
+        c, model = self.contacts, self.scene.model
+        wp.launch(
+            contacts_k.classify_contacts,
+            dim=c.rigid_contact_max,
+            inputs=[c.rigid_contact_count, c.rigid_contact_shape0, c.rigid_contact_shape1, c.rigid_contact_point0,
+                    c.rigid_contact_point1, c.rigid_contact_normal, c.rigid_contact_margin0, c.rigid_contact_margin1,
+                    model.shape_body, model.shape_world, self.shape_role, self.shape_self_column, state.body_q,
+                    self.cfg.constraints.contact_distance, self.task],
+            device=self.wp_device,
+        )
 
     def _drive_base(self, view: RobotView, state: newton.State) -> None:
         """The tracked base: the tracking wrench of the current command, on ``state`` (one substep)."""

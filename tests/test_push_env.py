@@ -136,6 +136,31 @@ def test_contacts_end_effector_and_base_collision(small_env):
     assert not ee_contact[2:].any() and not collisions[2:].any(), "robots far away touch nothing"
 
 
+
+def test_a_step_that_ends_a_contact_violates_nothing():
+    """Contacts are those of the state a step ends in (``env.constraints.contacts_at_step_end``), so the step whose
+    action leaves a contact is no collision; counted over the substeps (runs started before the field), it is one,
+    since its first substep starts in contact whatever the action. The physics is the same either way."""
+    collided, observations = {}, {}
+    for at_step_end in (False, True):
+        cfg = PushEnvConfig(num_envs=1, seed=1)
+        cfg.constraints.contacts_at_step_end = at_step_end
+        env = PushEnv(cfg)
+        env.set_episodes({0: EpisodeSpec(base=(-0.8, 0.0, 0.0), arm_q=(0.0,) * 5)})  # arm up: the base meets the box
+        actions = torch.zeros(1, 11)
+        actions[0, 6:] = -torch.tensor(env.scene.robot.arm_default[:5], dtype=torch.float32) / cfg.actions.arm_scale
+        steps = []
+        for t in range(130):
+            actions[0, 0] = 0.3 if t < 100 else -1.0  # drive into the object, then back off at full speed
+            obs, _, _, extras = env.step(actions)
+            steps.append(bool((extras["constraints"][0, 43:61] > 0.5).any()))
+        collided[at_step_end], observations[at_step_end] = np.array(steps), obs["critic"]
+    assert torch.equal(observations[False], observations[True])
+    at_end, over_substeps = np.flatnonzero(collided[True]), np.flatnonzero(collided[False])
+    assert 20 < len(at_end) and at_end[0] == over_substeps[0] and at_end[-1] >= 100, "one contact while pushing"
+    assert np.array_equal(over_substeps, np.append(at_end, at_end[-1] + 1)), "the step that leaves it differs"
+
+
 def test_same_seed_same_rollout():
     def rollout(seed):
         env = PushEnv(PushEnvConfig(num_envs=3, seed=seed))

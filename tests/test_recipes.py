@@ -46,14 +46,14 @@ def renamed(override: str) -> str:
     return f"{TrainConfig.MOVED_FIELDS.get(path, path)}={value}"
 
 
-PREDATES_OBJECT_AT_GOAL = "env.critic_reads_object_at_goal=False"
-"""What a command recorded before the critic read ``object_at_goal`` trained with, in today's fields."""
+PREDATES_ADDED_FIELDS = [f"{path}={value}" for path, value in TrainConfig.ADDED_FIELDS.items()]
+"""What a command recorded before the fields added since trained with, in today's fields."""
 
 
 @pytest.mark.parametrize("recipe, command", [("shipped_imitation.txt", 0), ("shipped_finetune.txt", 1)])
 def test_the_shipped_recipes_are_the_shipped_commands(recipe, command):
     argv = shlex.split(json.loads((ROOT / "dynpush" / "shipped" / "training.json").read_text())["commands"][command])
-    recorded = [renamed(item) for item in argv[argv.index("--set") + 1 :]] + [PREDATES_OBJECT_AT_GOAL]
+    recorded = [renamed(item) for item in argv[argv.index("--set") + 1 :]] + PREDATES_ADDED_FIELDS
     assert config_of(read_recipe(RECIPES / recipe)) == config_of(recorded)
 
 

@@ -73,8 +73,11 @@ def test_fine_tuning_fields_are_one_section_and_old_configs_read_into_it(tmp_pat
     loaded = TrainConfig.from_dict(long1)
     assert loaded.fine_tune == FineTuneConfig() and (loaded.iterations, loaded.env.num_envs) == (20000, 1024)
     assert loaded.p_max_overrides == {"collision": [0.1, 1.0]} and loaded.keep_checkpoints == 1
-    # Runs started before the critic read object_at_goal resume with the critic they have; new runs read it.
+    # Runs started before the critic read object_at_goal, or before contacts were those of a step's end state, resume
+    # as they trained; new runs have both.
     assert loaded.env.critic_reads_object_at_goal is False and cfg.env.critic_reads_object_at_goal is True
+    assert loaded.env.constraints.contacts_at_step_end is False and cfg.env.constraints.contacts_at_step_end is True
+    assert TrainConfig.from_dict({"env": {"num_envs": 8}}).env.constraints.contacts_at_step_end is True
     # --resume reads an old run folder's config.json through the same loader.
     run = tmp_path / "old"
     run.mkdir()

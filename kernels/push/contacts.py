@@ -38,7 +38,8 @@ def classify_contacts(
     contact_distance: float,
     task: PushTask,
 ):
-    """Marks ``task.contacts[w, column] = 1`` for every touching pair (accumulates over substeps)."""
+    """Marks ``task.contacts[w, column] = 1`` for every pair touching in the poses ``body_q`` (accumulates over the
+    launches of a step; ``env.constraints.contacts_at_step_end`` decides which states of the step are classified)."""
     i = wp.tid()
     if i >= contact_count[0]:
         return

@@ -137,19 +137,21 @@ def test_a_finished_run_continues_to_more_iterations_and_other_ppo_settings_in_a
     tiny_set = ["env.num_envs=8", "num_steps_per_env=6", "network.actor_hidden=(32,)", "network.critic_hidden=(32,)"]
     assert main(["train", "--runs", str(tmp_path), "--name", "run", "--set", *tiny_set, "iterations=2"]) == 0
     assert main(["train", "--runs", str(tmp_path), "--name", "run", "--resume", "--set", "env.num_envs=16"]) == 2
-    assert "only iterations, ppo.* (not ppo.returns_per_step) and CURRICULUM.promote_above / .demote_below" in (
-        capsys.readouterr().err)
+    assert ("only iterations, ppo.* (not ppo.returns_per_step), env.constraints.contacts_at_step_end and "
+            "CURRICULUM.promote_above / .demote_below") in capsys.readouterr().err
     for fixed in ("ppo.returns_per_step=False", "curriculum.step=0.1", "curriculum_window_episodes=10"):
         assert main(["train", "--runs", str(tmp_path), "--name", "run", "--resume", "--set", fixed]) == 2
         assert f"got ['{fixed.split('=')[0]}']" in capsys.readouterr().err
     assert len((tmp_path / "run" / "launches.jsonl").read_text().splitlines()) == 1  # refused launches wrote nothing
-    resumed_set = ["iterations=4", "ppo.lam=1.0", "mass_curriculum.demote_below=0.0", "behind_starts.promote_above=0.5"]
+    resumed_set = ["iterations=4", "ppo.lam=1.0", "mass_curriculum.demote_below=0.0", "behind_starts.promote_above=0.5",
+                   "env.constraints.contacts_at_step_end=False"]
     assert main(["train", "--runs", str(tmp_path), "--name", "run", "--resume", "--set", *resumed_set]) == 0
     saved = torch.load(tmp_path / "run" / "model_3.pt", weights_only=False)
     assert saved["iter"] == 4
     config = json.loads((tmp_path / "run" / "config.json").read_text())
     assert config["iterations"] == 4 and config["env"]["num_envs"] == 8 and config["ppo"]["lam"] == 1.0
     assert config["mass_curriculum"]["demote_below"] == 0.0 and config["behind_starts"]["promote_above"] == 0.5
+    assert config["env"]["constraints"]["contacts_at_step_end"] is False
     launches = [json.loads(line) for line in (tmp_path / "run" / "launches.jsonl").read_text().splitlines()]
     assert [launch["resume"] for launch in launches] == [False, True]
     assert launches[1]["command"].endswith("--resume --set " + " ".join(resumed_set))

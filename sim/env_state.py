@@ -243,8 +243,23 @@ class EnvBase:
 
     def state_mismatch(self, state: dict[str, np.ndarray]) -> str | None:
         """Why ``load_state_dict`` cannot restore ``state`` here (missing arrays, other shapes), or None."""
-        state = self._upgraded_state(state)
-        arrays = self._state_arrays()
+        return self._mismatch(self._upgraded_state(state), self._state_arrays())
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        """Restores :meth:`state_dict`."""
+        state, arrays = self._upgraded_state(state), self._state_arrays()
+        mismatch = self._mismatch(state, arrays)
+        if mismatch is not None:
+            raise ValueError(mismatch)
+        with wp.ScopedDevice(self.wp_device):
+            self._before_state_load(arrays, state)
+            for name, array in arrays.items():
+                array.assign(state[name])
+            self._after_state_load()
+
+    @staticmethod
+    def _mismatch(state: dict[str, np.ndarray], arrays: dict[str, wp.array]) -> str | None:
+        """Why ``state`` (already upgraded) cannot be written into ``arrays``, or None."""
         missing = set(arrays) - set(state)
         if missing:
             return f"environment state lacks {sorted(missing)}"
@@ -253,19 +268,6 @@ class EnvBase:
             if tuple(state[name].shape) != shape:
                 return f"environment state {name!r} has shape {state[name].shape}, expected {shape} (same num_envs required)"
         return None
-
-    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
-        """Restores :meth:`state_dict`."""
-        mismatch = self.state_mismatch(state)
-        if mismatch is not None:
-            raise ValueError(mismatch)
-        state = self._upgraded_state(state)
-        arrays = self._state_arrays()
-        with wp.ScopedDevice(self.wp_device):
-            self._before_state_load(arrays, state)
-            for name, array in arrays.items():
-                array.assign(state[name])
-            self._after_state_load()
 
     def _upgraded_state(self, state: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """``state`` as this version saves it, from a checkpoint an older version wrote (unchanged by default)."""

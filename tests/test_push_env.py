@@ -136,7 +136,6 @@ def test_contacts_end_effector_and_base_collision(small_env):
     assert not ee_contact[2:].any() and not collisions[2:].any(), "robots far away touch nothing"
 
 
-
 def test_a_step_that_ends_a_contact_violates_nothing():
     """Contacts are those of the state a step ends in (``env.constraints.contacts_at_step_end``), so the step whose
     action leaves a contact is no collision; counted over the substeps (runs started before the field), it is one,

@@ -213,8 +213,8 @@ def run_config(cfg: T, run_dir: Path, resume: bool, resume_overrides: list[str] 
     fixed = [field for field in fields if not is_resumable(field)]
     if fixed:
         raise ConfigError(f"--resume continues the run's own config; only iterations, ppo.* (not "
-                          f"ppo.returns_per_step), {CONTACT_RULE} and CURRICULUM.promote_above / .demote_below "
-                          f"(CURRICULUM one of {', '.join(CURRICULA)}) may be set, got {fixed}")
+                          f"ppo.returns_per_step), {NOISE_FLOOR}, {CONTACT_RULE} and CURRICULUM.promote_above / "
+                          f".demote_below (CURRICULUM one of {', '.join(CURRICULA)}) may be set, got {fixed}")
     return apply_overrides(type(cfg).from_dict(read_json(config_path)), list(resume_overrides)).validate()
 
 
@@ -224,17 +224,22 @@ CURRICULA = ("curriculum", "mass_curriculum", "distance_curriculum", "behind_sta
 CONTACT_RULE = "env.constraints.contacts_at_step_end"
 """Which states of a step its collisions are read from: the credit CaT gives, not the physics or an input's layout."""
 
+NOISE_FLOOR = "network.min_noise_std"
+"""The floor under the action noise: rsl_rl clamps the learnt std to it when it samples, the weights stay as saved."""
+
 
 def is_resumable(field: str) -> bool:
     """Whether ``--resume --set`` may change ``field`` (a dotted config path): the run's length, the PPO update's
-    settings and the success rates at which the curricula move (``<curriculum>.promote_above`` and
-    ``.demote_below``) and which states of a step its collisions are read from (:data:`CONTACT_RULE`), the learning
-    loop; the environment, the networks, the other constraints and the levels' steps stay as the run started.
+    settings, the floor under the action noise (:data:`NOISE_FLOOR`), the success rates at which the curricula move
+    (``<curriculum>.promote_above`` and ``.demote_below``) and which states of a step its collisions are read from
+    (:data:`CONTACT_RULE`), the learning loop; the environment, the networks' layout, the other constraints and the
+    levels' steps stay as the run started.
     ``ppo.returns_per_step`` stays too: it changes the units of the values the critic has learnt."""
     section, _, name = field.partition(".")
     if section == "ppo":
         return name != "returns_per_step"
-    return field in ("iterations", CONTACT_RULE) or (section in CURRICULA and name in ("promote_above", "demote_below"))
+    return (field in ("iterations", NOISE_FLOOR, CONTACT_RULE)
+            or (section in CURRICULA and name in ("promote_above", "demote_below")))
 
 
 def read_onnx_actor(cfg: TaskTrainConfig, init_from: Path | None) -> torch.nn.Module | None:

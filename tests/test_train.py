@@ -137,7 +137,8 @@ def test_a_finished_run_continues_to_more_iterations_and_other_ppo_settings_in_a
     tiny_set = ["env.num_envs=8", "num_steps_per_env=6", "network.actor_hidden=(32,)", "network.critic_hidden=(32,)"]
     assert main(["train", "--runs", str(tmp_path), "--name", "run", "--set", *tiny_set, "iterations=2"]) == 0
     assert main(["train", "--runs", str(tmp_path), "--name", "run", "--resume", "--set", "env.num_envs=16"]) == 2
-    assert ("only iterations, ppo.* (not ppo.returns_per_step), env.constraints.contacts_at_step_end and "
+    assert ("only iterations, ppo.* (not ppo.returns_per_step), network.min_noise_std, "
+            "env.constraints.contacts_at_step_end and "
             "CURRICULUM.promote_above / .demote_below") in capsys.readouterr().err
     for fixed in ("ppo.returns_per_step=False", "curriculum.step=0.1", "curriculum_window_episodes=10"):
         assert main(["train", "--runs", str(tmp_path), "--name", "run", "--resume", "--set", fixed]) == 2
@@ -155,6 +156,19 @@ def test_a_finished_run_continues_to_more_iterations_and_other_ppo_settings_in_a
     launches = [json.loads(line) for line in (tmp_path / "run" / "launches.jsonl").read_text().splitlines()]
     assert [launch["resume"] for launch in launches] == [False, True]
     assert launches[1]["command"].endswith("--resume --set " + " ".join(resumed_set))
+
+
+def test_a_resumed_run_samples_its_actions_above_a_new_noise_floor(tmp_path):
+    from dynpush.policies.training import set_action_std
+
+    train(tiny(2), tmp_path / "run")
+    resumed = train(tiny(2), tmp_path / "run", resume=True,
+                    resume_overrides=["iterations=3", "network.min_noise_std=0.45"])
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["network"]["min_noise_std"] == 0.45
+    actor = resumed.alg.actor
+    set_action_std(actor, 0.1)  # a learnt std below the floor, as a long run's shrinks
+    actor.distribution.update(torch.zeros(1, actor.distribution.std_param.numel()))
+    assert torch.allclose(actor.output_std, torch.full_like(actor.output_std, 0.45))
 
 
 def test_the_resumable_curricula_are_the_success_gated_levels_of_the_config():
